@@ -13,10 +13,10 @@
 
 pub mod address;
 pub mod heartbeat;
-// pub mod mavlink;
+pub mod mavlink;
 pub mod rc;
 pub mod shield;
-// pub mod tlog;
+pub mod tlog;
 pub mod transport;
 pub mod vehicle;
 
