@@ -10,9 +10,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use super::wire::{
-    AckRepr, CommandDecoder, CommandRepr, ShieldFlags, Special, TelemetryRepr, UpRepr,
-};
+use super::wire::{AckRepr, Event, Receiver, ShieldFlags, Special, TelemetryRepr, UpRepr};
 use crate::rc::{ChannelMap, Pulses, Sticks};
 use crate::transport::{Connection, Transport, is_timeout, run_sessions};
 
@@ -65,7 +63,7 @@ impl Default for Sensors {
 #[derive(Debug)]
 pub struct ShieldEmulator {
     config: EmulatorConfig,
-    decoder: CommandDecoder,
+    receiver: Receiver,
     outputs: Option<Pulses>,
     flags: ShieldFlags,
     last_valid: Option<Duration>,
@@ -90,7 +88,7 @@ impl ShieldEmulator {
     pub fn new(config: EmulatorConfig) -> Self {
         Self {
             config,
-            decoder: CommandDecoder::new(),
+            receiver: Receiver::new(),
             outputs: None,
             flags: ShieldFlags::default(),
             last_valid: None,
@@ -143,39 +141,32 @@ impl ShieldEmulator {
     /// Feeds received bytes at time `now`.
     pub fn receive(&mut self, bytes: &[u8], now: Duration) {
         for &b in bytes {
-            match self.decoder.push(b) {
+            match self.receiver.push(b) {
                 None => {}
-                Some(Err(e)) => {
+                Some(Event::Dropped(e)) => {
                     self.commands_bad += 1;
                     self.rx_errors = self.rx_errors.saturating_add(1);
                     tracing::debug!("shield dropped input: {e}");
                 }
-                Some(Ok(c)) => {
+                Some(event) => {
                     self.commands_ok += 1;
                     self.last_valid = Some(now);
-                    self.execute(c, now);
+                    self.execute(event, now);
                 }
             }
         }
         self.tick(now);
     }
 
-    fn execute(&mut self, c: CommandRepr, now: Duration) {
-        match c {
-            CommandRepr::Channel { axis, pulse_us } => {
-                if self.flags.landing {
-                    return; // landing owns the outputs
+    fn execute(&mut self, event: Event, now: Duration) {
+        match event {
+            Event::Dropped(_) => {}
+            Event::Pulses(p) => {
+                if !self.flags.landing {
+                    self.apply(p); // while landing, the landing owns the outputs
                 }
-                let mut p = self
-                    .outputs
-                    .unwrap_or(self.config.channel_map.pulses(&Sticks {
-                        throttle: -1.0,
-                        ..Sticks::CENTRED
-                    }));
-                p.set(axis, pulse_us);
-                self.apply(p);
             }
-            CommandRepr::Special { action, seq } => {
+            Event::Special { action, seq } => {
                 let slot = usize::from(action.id() - 4);
                 let repeat = self.last_seq[slot] == Some(seq);
                 let accepted = if repeat {
@@ -408,8 +399,8 @@ mod tests {
         Duration::from_millis(n)
     }
 
-    fn special(action: Special, seq: u16) -> [u8; 2] {
-        CommandRepr::Special { action, seq }.to_bytes().unwrap()
+    fn special(action: Special, seq: u16) -> [u8; 8] {
+        crate::shield::wire::special_bytes(action, seq).unwrap()
     }
 
     fn acks(em: &mut ShieldEmulator) -> Vec<AckRepr> {

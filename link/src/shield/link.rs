@@ -9,7 +9,7 @@ use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use super::wire::{CommandRepr, FrameDecoder, RpytRepr, Special, UpRepr};
+use super::wire::{FrameDecoder, RpytRepr, Special, UpRepr, special_bytes};
 use crate::address::Address;
 use crate::heartbeat::HeartbeatMonitor;
 use crate::rc::{ChannelMap, Sticks};
@@ -203,12 +203,7 @@ fn session(shared: &Arc<Shared>, conn: Connection, stop: &AtomicBool) {
                     }));
                     return false;
                 }
-                if let Ok(b) = (CommandRepr::Special {
-                    action: p.action,
-                    seq: p.seq,
-                })
-                .to_bytes()
-                {
+                if let Ok(b) = special_bytes(p.action, p.seq) {
                     out.extend_from_slice(&b);
                 }
                 p.attempts += 1;

@@ -371,6 +371,117 @@ impl CommandDecoder {
     }
 }
 
+/// What the shield's receiver does with the bytes it gets.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Event {
+    /// A complete RPYT packet: output these pulses.
+    Pulses(Pulses),
+    /// A whole special packet (see [`special_bytes`]).
+    Special {
+        /// The action.
+        action: Special,
+        /// Its sequence number.
+        seq: u16,
+    },
+    /// Bytes or commands were dropped.
+    Dropped(WireError),
+}
+
+/// The shield's receive logic on top of [`CommandDecoder`]: pulses apply only from a whole RPYT
+/// packet (four valid channel commands in order, nothing in between), and a special command only
+/// from a whole special packet (four commands of that id carrying seq, 1023−seq, seq, 1023−seq).
+/// Random noise forms an RPYT packet with probability about 6·10⁻⁸ per byte offset (and its
+/// pulses last one packet period), a special packet about 2⁻⁵², and never a pulse outside
+/// 1000–2000 µs.
+#[derive(Debug, Default, Clone)]
+pub struct Receiver {
+    decoder: CommandDecoder,
+    packet: Pulses4,
+    special: Option<(Special, u16, usize)>,
+}
+
+#[derive(Debug, Default, Clone, Copy)]
+struct Pulses4 {
+    got: usize,
+    us: [u16; 4],
+}
+
+impl Receiver {
+    /// A receiver waiting for the start of a command.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Feeds one byte.
+    pub fn push(&mut self, byte: u8) -> Option<Event> {
+        match self.decoder.push(byte)? {
+            Err(e) => {
+                self.packet.got = 0;
+                self.special = None;
+                Some(Event::Dropped(e))
+            }
+            Ok(CommandRepr::Channel { axis, pulse_us }) => {
+                self.special = None;
+                let index = usize::from(axis_id(axis));
+                if index != self.packet.got {
+                    let found = axis_id(axis);
+                    let position = self.packet.got;
+                    self.packet.got = 0;
+                    if index != 0 {
+                        return Some(Event::Dropped(WireError::OutOfOrder { position, found }));
+                    }
+                }
+                self.packet.us[index] = pulse_us;
+                self.packet.got = index + 1;
+                if self.packet.got < 4 {
+                    return None;
+                }
+                self.packet.got = 0;
+                let [roll, pitch, yaw, throttle] = self.packet.us;
+                Some(Event::Pulses(Pulses {
+                    roll,
+                    pitch,
+                    yaw,
+                    throttle,
+                }))
+            }
+            Ok(CommandRepr::Special { action, seq: value }) => {
+                self.packet.got = 0;
+                match self.special {
+                    Some((a, seq, got)) if a == action && value == special_value(seq, got) => {
+                        if got == 3 {
+                            self.special = None;
+                            return Some(Event::Special { action, seq });
+                        }
+                        self.special = Some((a, seq, got + 1));
+                    }
+                    _ => self.special = Some((action, value, 1)),
+                }
+                None
+            }
+        }
+    }
+}
+
+/// The value of command `i` (0–3) of a special packet: seq, 1023−seq, seq, 1023−seq.
+fn special_value(seq: u16, i: usize) -> u16 {
+    if i % 2 == 0 { seq } else { 1023 - seq }
+}
+
+/// The 8-byte special packet a station sends for a special command.
+pub fn special_bytes(action: Special, seq: u16) -> Result<[u8; 8], WireError> {
+    if seq > 1023 {
+        return Err(WireError::BadField("sequence above 1023"));
+    }
+    let mut out = [0u8; 8];
+    for i in 0..4 {
+        let value = special_value(seq, i);
+        let b = CommandRepr::Special { action, seq: value }.to_bytes()?;
+        out[2 * i..2 * i + 2].copy_from_slice(&b);
+    }
+    Ok(out)
+}
+
 // ---------------------------------------------------------------------------------------------
 // Upstream frames
 // ---------------------------------------------------------------------------------------------
@@ -888,7 +999,107 @@ mod tests {
         }
     }
 
+    fn receive_all(bytes: &[u8]) -> Vec<Event> {
+        let mut r = Receiver::new();
+        bytes
+            .iter()
+            .filter_map(|&b| r.push(b))
+            .filter(|e| !matches!(e, Event::Dropped(_)))
+            .collect()
+    }
+
+    #[test]
+    fn receiver_needs_whole_packets() {
+        assert_eq!(receive_all(&FIXTURE), vec![Event::Pulses(FIXTURE_PULSES)]);
+        assert!(receive_all(&FIXTURE[..6]).is_empty());
+        // A packet broken by a lost byte is not applied; the next one is.
+        let mut b = FIXTURE.to_vec();
+        b.remove(3);
+        b.extend_from_slice(&FIXTURE);
+        assert_eq!(receive_all(&b), vec![Event::Pulses(FIXTURE_PULSES)]);
+        assert_eq!(
+            special_bytes(Special::Arm, 1).unwrap(),
+            [0xD8, 0x01, 0xDF, 0x7E, 0xD8, 0x01, 0xDF, 0x7E] // PROTOCOL.md's example
+        );
+        let arm = special_bytes(Special::Arm, 9).unwrap();
+        assert_eq!(
+            receive_all(&arm),
+            vec![Event::Special {
+                action: Special::Arm,
+                seq: 9
+            }]
+        );
+        assert!(receive_all(&arm[..6]).is_empty());
+        // A stuck line repeating one command never forms a special packet.
+        let one = CommandRepr::Special {
+            action: Special::Disarm,
+            seq: 5,
+        }
+        .to_bytes()
+        .unwrap();
+        assert!(receive_all(&one.repeat(100)).is_empty());
+        assert!(special_bytes(Special::Arm, 1024).is_err());
+    }
+
+    /// A deterministic noise source (xorshift64*), so the noise test below cannot be flaky.
+    fn noise(seed: u64, n: usize) -> Vec<u8> {
+        let mut x = seed;
+        (0..n)
+            .map(|_| {
+                x ^= x >> 12;
+                x ^= x << 25;
+                x ^= x >> 27;
+                (x.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 56) as u8
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_megabyte_of_noise_between_packets() {
+        let mut bytes = vec![];
+        let mut real = 0;
+        for chunk in noise(0x5eed, 1 << 20).chunks(97) {
+            bytes.extend_from_slice(chunk);
+            bytes.extend_from_slice(&FIXTURE);
+            real += 1;
+        }
+        let got = receive_all(&bytes);
+        assert!(
+            got.iter().all(|e| matches!(e, Event::Pulses(_))),
+            "noise formed a special command"
+        );
+        let wrong = got
+            .iter()
+            .filter(|e| **e != Event::Pulses(FIXTURE_PULSES))
+            .count();
+        // Expected ≈ 2^20 offsets × 6·10⁻⁸ ≈ 0.06 packets formed by noise.
+        assert!(wrong <= 1, "{wrong} packets formed by noise");
+        assert_eq!(got.len() - wrong, real, "every real packet is applied");
+    }
+
     proptest! {
+        #[test]
+        fn every_packet_after_noise_is_applied(
+            noise in proptest::collection::vec(proptest::collection::vec(any::<u8>(), 0..40), 1..30),
+        ) {
+            let mut bytes = vec![];
+            for n in &noise {
+                bytes.extend_from_slice(n);
+                bytes.extend_from_slice(&FIXTURE);
+            }
+            let got = receive_all(&bytes);
+            let real = got.iter().filter(|e| **e == Event::Pulses(FIXTURE_PULSES)).count();
+            // Recovery within one command: the packet right after any noise is applied.
+            prop_assert!(real >= noise.len(), "{:?}", got);
+            for e in got {
+                if let Event::Pulses(p) = e {
+                    for a in Axis::ALL {
+                        prop_assert!((PULSE_MIN_US..=PULSE_MAX_US).contains(&p.get(a)));
+                    }
+                }
+            }
+        }
+
         #[test]
         fn arbitrary_bytes_never_yield_a_bad_pulse(bytes in proptest::collection::vec(any::<u8>(), 0..512)) {
             let (ok, _) = decode_all(&bytes);
