@@ -195,7 +195,7 @@ pub struct LinkStatus {
     pub connections: u32,
     /// Frames received intact.
     pub frames_ok: u64,
-    /// Frames or bytes dropped as garbage, bad checksum or out of range.
+    /// Input dropped: bad frames, runs of garbage bytes, rejected signatures.
     pub frames_bad: u64,
 }
 

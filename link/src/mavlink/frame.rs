@@ -166,6 +166,8 @@ pub struct FrameScanner {
     pub skipped_bytes: u64,
     /// Candidate frames dropped for a bad checksum or unknown flags.
     pub bad_frames: u64,
+    /// Runs of skipped bytes (each run of noise or text counts once).
+    pub garbage_runs: u64,
 }
 
 impl FrameScanner {
@@ -189,10 +191,12 @@ impl FrameScanner {
             let rest = &self.buf[self.start..];
             let Some(at) = rest.iter().position(|&b| b == STX_V1 || b == STX_V2) else {
                 self.skipped_bytes += rest.len() as u64;
+                self.garbage_runs += u64::from(!rest.is_empty());
                 self.start = self.buf.len();
                 return None;
             };
             self.skipped_bytes += at as u64;
+            self.garbage_runs += u64::from(at > 0);
             self.start += at;
             match check(&self.buf[self.start..]) {
                 Check::Incomplete => return None,

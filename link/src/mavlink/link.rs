@@ -177,6 +177,8 @@ struct State {
     frames_ok: u64,
     frames_bad: u64,
     rejected_signatures: u64,
+    /// Status texts from systems not yet heard by heartbeat (vehicles talk before their first one).
+    early_texts: BTreeMap<u8, TextQueue>,
 }
 
 struct Shared {
@@ -255,6 +257,7 @@ impl MavlinkLink {
                 frames_ok: 0,
                 frames_bad: 0,
                 rejected_signatures: 0,
+                early_texts: BTreeMap::new(),
             }),
             wake: Condvar::new(),
             name: format!("mavlink {}", transport.address()),
@@ -792,7 +795,7 @@ fn read_loop(shared: &Shared, mut reader: Box<dyn Read + Send>, alive: &AtomicBo
         while let Some(frame) = scanner.next_frame() {
             handle_frame(shared, &frame, now);
         }
-        let bad = scanner.bad_frames + scanner.skipped_bytes.div_ceil(16);
+        let bad = scanner.bad_frames + scanner.garbage_runs;
         if bad != reported_bad {
             shared.lock().frames_bad += bad - reported_bad;
             reported_bad = bad;
@@ -848,13 +851,14 @@ fn handle_frame(shared: &Shared, frame: &RawFrame, now: Instant) {
             return;
         }
         let is_new = !s.vehicles.contains_key(&sys);
+        let early = s.early_texts.remove(&sys).unwrap_or_default();
         let v = s.vehicles.entry(sys).or_insert_with(|| Vehicle {
             component: header.component_id,
             autopilot: hb.autopilot,
             custom_mode: hb.custom_mode,
             monitor: HeartbeatMonitor::new(cfg.heartbeat_period),
             telemetry: Telemetry::default(),
-            texts: TextQueue::default(),
+            texts: early,
             sticks: None,
             release_frames: 0,
             has_rangefinder: false,
@@ -956,6 +960,17 @@ fn handle_frame(shared: &Shared, frame: &RawFrame, now: Instant) {
         return;
     }
     let Some(v) = s.vehicles.get_mut(&sys) else {
+        if let MavMessage::STATUSTEXT(st) = &msg {
+            let text = String::from_utf8_lossy(&st.text[..])
+                .trim_end_matches('\0')
+                .to_owned();
+            tracing::info!("system {sys}: {text}");
+            let queue = s.early_texts.entry(sys).or_default();
+            queue.push(StatusText {
+                severity: st.severity as u8,
+                text,
+            });
+        }
         return;
     };
     let t = &mut v.telemetry;

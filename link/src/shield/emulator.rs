@@ -125,6 +125,11 @@ impl ShieldEmulator {
         self.sensors = sensors;
     }
 
+    /// Queues raw bytes for the station, e.g. noise for a fault-injection test.
+    pub fn queue_upstream_raw(&mut self, bytes: &[u8]) {
+        self.upstream.extend_from_slice(bytes);
+    }
+
     /// Takes the bytes to send to the station.
     pub fn take_upstream(&mut self) -> Vec<u8> {
         std::mem::take(&mut self.upstream)
