@@ -174,12 +174,18 @@ pub fn run(args: &ProbeArgs) -> anyhow::Result<()> {
     {
         bail!("--seconds must be zero or more and --wait more than zero");
     }
+    let map = match args.protocol {
+        Protocol::Mavlink => MavlinkConfig::default().channel_map,
+        Protocol::Shield => ShieldConfig::default().channel_map,
+    };
+    // Check all input before touching the vehicle.
+    let rc = args.rc.as_deref().map(|s| parse_rc(s, &map)).transpose()?;
     let p = Printer {
         json: args.json,
         start: Instant::now(),
     };
     let wait = Duration::from_secs_f64(args.wait);
-    let (vehicle, map): (Arc<dyn VehicleLink>, ChannelMap) = match args.protocol {
+    let vehicle: Arc<dyn VehicleLink> = match args.protocol {
         Protocol::Mavlink => {
             let mut config = MavlinkConfig::default();
             if let Some(path) = &args.signing_key {
@@ -188,7 +194,6 @@ pub fn run(args: &ProbeArgs) -> anyhow::Result<()> {
                 })?;
                 config.signing = Some(SigningKey::from_hex(&text).map_err(anyhow::Error::msg)?);
             }
-            let map = config.channel_map;
             let link = MavlinkLink::connect(&address, config)?;
             let vehicle = match args.sysid {
                 Some(id) => {
@@ -204,12 +209,14 @@ pub fn run(args: &ProbeArgs) -> anyhow::Result<()> {
                     ),
                 },
             };
-            (Arc::new(vehicle), map)
+            Arc::new(vehicle)
         }
         Protocol::Shield => {
-            let config = ShieldConfig::default();
-            let map = config.channel_map;
-            (Arc::new(ShieldLink::connect(&address, config)?), map)
+            let config = ShieldConfig {
+                channel_map: map,
+                ..ShieldConfig::default()
+            };
+            Arc::new(ShieldLink::connect(&address, config)?)
         }
     };
     if !wait_until(wait, || vehicle.status().state == LinkState::Connected) {
@@ -219,7 +226,6 @@ pub fn run(args: &ProbeArgs) -> anyhow::Result<()> {
             args.wait
         );
     }
-    let rc = args.rc.as_deref().map(|s| parse_rc(s, &map)).transpose()?;
     // Let the first telemetry arrive before the first report.
     std::thread::sleep(Duration::from_millis(300));
     p.event(

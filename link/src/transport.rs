@@ -18,6 +18,9 @@ use crate::address::{Address, HostPort};
 pub const READ_POLL: Duration = Duration::from_millis(100);
 const CONNECT_TIMEOUT: Duration = Duration::from_secs(2);
 const WRITE_TIMEOUT: Duration = Duration::from_secs(1);
+/// The UDP peers heard on a `udpin` socket, with when each was last heard.
+type Peers = Arc<Mutex<Vec<(SocketAddr, Instant)>>>;
+
 /// UDP peers not heard from for this long are no longer sent to.
 const UDP_PEER_TTL: Duration = Duration::from_secs(10);
 const MAX_UDP_PEERS: usize = 16;
@@ -102,7 +105,7 @@ pub struct Transport {
 enum State {
     Outgoing,
     TcpListener(TcpListener),
-    Udp(UdpSocket, Arc<Mutex<Vec<(SocketAddr, Instant)>>>),
+    Udp(UdpSocket, Peers),
 }
 
 impl Transport {
@@ -280,14 +283,14 @@ impl Read for TcpReader {
 /// Presents datagrams as a byte stream; remembers who sent them on a `udpin` socket.
 struct UdpReader {
     socket: UdpSocket,
-    peers: Option<Arc<Mutex<Vec<(SocketAddr, Instant)>>>>,
+    peers: Option<Peers>,
     buf: Vec<u8>,
     start: usize,
     end: usize,
 }
 
 impl UdpReader {
-    fn new(socket: UdpSocket, peers: Option<Arc<Mutex<Vec<(SocketAddr, Instant)>>>>) -> Self {
+    fn new(socket: UdpSocket, peers: Option<Peers>) -> Self {
         Self {
             socket,
             peers,
@@ -329,7 +332,7 @@ impl Read for UdpReader {
 /// Sends each write as one datagram to every peer heard recently (messages carry their target).
 struct UdpInWriter {
     socket: UdpSocket,
-    peers: Arc<Mutex<Vec<(SocketAddr, Instant)>>>,
+    peers: Peers,
 }
 
 impl Write for UdpInWriter {
@@ -404,7 +407,7 @@ pub fn run_sessions(
             Err(TransportError::Stopped) => break,
             Err(e) => {
                 // Say it once, then again every 30 attempts, so a missing vehicle does not flood the log.
-                if failures % 30 == 0 {
+                if failures.is_multiple_of(30) {
                     tracing::warn!("{e}; retrying");
                 }
                 failures += 1;

@@ -46,7 +46,7 @@ fn fly(v: &MavlinkVehicle) {
     let a = t.attitude.expect("attitude");
     assert!(
         (a.pitch + 0.1745).abs() < 1e-3
-            && (a.yaw + 1.5708).abs() < 1e-3
+            && (a.yaw + std::f32::consts::FRAC_PI_2).abs() < 1e-3
             && (a.roll - 0.05).abs() < 1e-3,
         "{a:?}"
     );

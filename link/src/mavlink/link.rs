@@ -543,9 +543,11 @@ fn session(shared: &Arc<Shared>, conn: Connection) {
                         ));
                     } else if v.release_frames > 0 {
                         v.release_frames -= 1;
-                        let mut release = RC_CHANNELS_OVERRIDE_DATA::default();
-                        release.target_system = id;
-                        release.target_component = v.component;
+                        let release = RC_CHANNELS_OVERRIDE_DATA {
+                            target_system: id,
+                            target_component: v.component,
+                            ..RC_CHANNELS_OVERRIDE_DATA::default()
+                        };
                         out.push(MavMessage::RC_CHANNELS_OVERRIDE(release));
                     }
                 }
@@ -814,17 +816,17 @@ fn read_loop(shared: &Shared, mut reader: Box<dyn Read + Send>, alive: &AtomicBo
 }
 
 fn handle_frame(shared: &Shared, frame: &RawFrame, now: Instant) {
-    if let Some(signing) = &shared.signing {
-        if !frame.verify(signing) {
-            let mut s = shared.lock();
-            s.rejected_signatures += 1;
-            s.frames_bad += 1;
-            tracing::warn!(
-                "{}: dropped a frame with a missing, wrong or replayed signature",
-                shared.name
-            );
-            return;
-        }
+    if let Some(signing) = &shared.signing
+        && !frame.verify(signing)
+    {
+        let mut s = shared.lock();
+        s.rejected_signatures += 1;
+        s.frames_bad += 1;
+        tracing::warn!(
+            "{}: dropped a frame with a missing, wrong or replayed signature",
+            shared.name
+        );
+        return;
     }
     let msg = match frame.decode() {
         Ok(m) => m,

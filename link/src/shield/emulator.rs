@@ -322,61 +322,84 @@ pub fn serve(
             em.receive(&buf[..got], start.elapsed());
             em.take_upstream()
         };
-        if !up.is_empty() {
-            if let Err(e) = conn.writer.write_all(&up) {
-                tracing::warn!("shield emulator: write failed: {e}");
-                return;
-            }
+        if !up.is_empty()
+            && let Err(e) = conn.writer.write_all(&up)
+        {
+            tracing::warn!("shield emulator: write failed: {e}");
+            return;
         }
     }
 }
 
 /// A shield emulator serving a transport on its own thread, reconnecting like real hardware
-/// (a board that is power-cycled keeps its state here; a new TCP client gets the same shield).
+/// (a new TCP client gets the same shield). The firmware's clock runs whether or not anyone is
+/// connected, so the link-loss failsafe fires when the station disappears.
 pub struct EmulatorServer {
     emulator: Arc<Mutex<ShieldEmulator>>,
     stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<()>>,
+    threads: Vec<JoinHandle<()>>,
 }
 
 impl EmulatorServer {
     /// Serves `transport` (e.g. `tcpin:127.0.0.1:0`) with a new emulator.
     pub fn spawn(mut transport: Transport, config: EmulatorConfig) -> Self {
-        let emulator = Arc::new(Mutex::new(ShieldEmulator::new(config)));
-        let stop = Arc::new(AtomicBool::new(false));
-        let (em, st) = (emulator.clone(), stop.clone());
-        let thread = std::thread::Builder::new()
-            .name("shield-emulator".into())
-            .spawn(move || {
-                let start = Instant::now();
-                run_sessions(
-                    &mut transport,
-                    &st,
-                    |_| {},
-                    |conn| serve(&em, conn, &st, start),
-                );
-            })
-            .ok();
-        Self {
-            emulator,
-            stop,
-            thread,
-        }
+        Self::start(config, move |em, stop, connected, start| {
+            run_sessions(
+                &mut transport,
+                stop,
+                |up| connected.store(up, Ordering::Relaxed),
+                |conn| serve(em, conn, stop, start),
+            );
+        })
     }
 
     /// Serves one already-open connection (e.g. the master side of a pseudo-terminal pair).
     pub fn spawn_on(conn: Connection, config: EmulatorConfig) -> Self {
+        Self::start(config, move |em, stop, connected, start| {
+            connected.store(true, Ordering::Relaxed);
+            serve(em, conn, stop, start);
+            connected.store(false, Ordering::Relaxed);
+        })
+    }
+
+    fn start(
+        config: EmulatorConfig,
+        io: impl FnOnce(&Mutex<ShieldEmulator>, &AtomicBool, &AtomicBool, Instant) + Send + 'static,
+    ) -> Self {
         let emulator = Arc::new(Mutex::new(ShieldEmulator::new(config)));
         let stop = Arc::new(AtomicBool::new(false));
+        let connected = Arc::new(AtomicBool::new(false));
+        let start = Instant::now();
+        let mut threads = vec![];
+        let (em, st, co) = (emulator.clone(), stop.clone(), connected.clone());
+        threads.extend(
+            std::thread::Builder::new()
+                .name("shield-emulator".into())
+                .spawn(move || io(&em, &st, &co, start))
+                .ok(),
+        );
         let (em, st) = (emulator.clone(), stop.clone());
-        let thread = std::thread::Builder::new()
-            .name("shield-emulator".into())
-            .spawn(move || serve(&em, conn, &st, Instant::now()))
-            .ok();
+        threads.extend(
+            std::thread::Builder::new()
+                .name("shield-clock".into())
+                .spawn(move || {
+                    while !st.load(Ordering::Relaxed) {
+                        {
+                            let mut e = em.lock().unwrap_or_else(PoisonError::into_inner);
+                            e.tick(start.elapsed());
+                            if !connected.load(Ordering::Relaxed) {
+                                e.take_upstream(); // a UART with nobody listening
+                            }
+                        }
+                        std::thread::sleep(Duration::from_millis(20));
+                    }
+                })
+                .ok(),
+        );
         Self {
             emulator,
             stop,
-            thread,
+            threads,
         }
     }
 
@@ -389,7 +412,7 @@ impl EmulatorServer {
 impl Drop for EmulatorServer {
     fn drop(&mut self) {
         self.stop.store(true, Ordering::Relaxed);
-        if let Some(t) = self.thread.take() {
+        for t in self.threads.drain(..) {
             let _ = t.join();
         }
     }

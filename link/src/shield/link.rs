@@ -225,11 +225,11 @@ fn session(shared: &Arc<Shared>, conn: Connection, stop: &AtomicBool) {
                 }
             }
         }
-        if !out.is_empty() {
-            if let Err(e) = writer.write_all(&out) {
-                tracing::warn!("shield link: write failed: {e}");
-                break;
-            }
+        if !out.is_empty()
+            && let Err(e) = writer.write_all(&out)
+        {
+            tracing::warn!("shield link: write failed: {e}");
+            break;
         }
     }
     closer_alive.store(false, Ordering::Relaxed);
@@ -311,18 +311,17 @@ fn apply(s: &mut State, frame: UpRepr, now: Instant) {
                 .pending
                 .iter()
                 .position(|p| p.action == a.action && p.seq == a.seq)
+                && let Some(p) = s.pending.remove(i)
             {
-                if let Some(p) = s.pending.remove(i) {
-                    let r = if a.accepted {
-                        Ok(())
-                    } else {
-                        Err(CommandError::Rejected {
-                            command: p.command,
-                            reason: "the shield refused it".into(),
-                        })
-                    };
-                    let _ = p.reply.send(r);
-                }
+                let r = if a.accepted {
+                    Ok(())
+                } else {
+                    Err(CommandError::Rejected {
+                        command: p.command,
+                        reason: "the shield refused it".into(),
+                    })
+                };
+                let _ = p.reply.send(r);
             }
         }
         UpRepr::Text(text) => {

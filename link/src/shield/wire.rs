@@ -465,7 +465,7 @@ impl Receiver {
 
 /// The value of command `i` (0–3) of a special packet: seq, 1023−seq, seq, 1023−seq.
 fn special_value(seq: u16, i: usize) -> u16 {
-    if i % 2 == 0 { seq } else { 1023 - seq }
+    if i.is_multiple_of(2) { seq } else { 1023 - seq }
 }
 
 /// The 8-byte special packet a station sends for a special command.
