@@ -21,7 +21,10 @@ use link::{LinkState, Pulses, Sticks, VehicleLink};
 
 fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
-    println!("link benchmarks ({} run)\n", if quick { "quick" } else { "full" });
+    println!(
+        "link benchmarks ({} run)\n",
+        if quick { "quick" } else { "full" }
+    );
     shield(quick);
     mavlink_encode(quick);
     tlog(quick);
@@ -29,7 +32,10 @@ fn main() {
 }
 
 fn rate(label: &str, n: f64, unit: &str, secs: f64) {
-    println!("{label:<48} {:>12.0} {unit}/s   ({n:.0} in {secs:.3} s)", n / secs);
+    println!(
+        "{label:<48} {:>12.0} {unit}/s   ({n:.0} in {secs:.3} s)",
+        n / secs
+    );
 }
 
 fn shield(quick: bool) {
@@ -38,15 +44,34 @@ fn shield(quick: bool) {
     let t = Instant::now();
     for i in 0..n {
         let us = 1000 + (i % 1001) as u16;
-        RpytRepr(Pulses { roll: us, pitch: us, yaw: us, throttle: us }).emit(&mut out).ok();
+        RpytRepr(Pulses {
+            roll: us,
+            pitch: us,
+            yaw: us,
+            throttle: us,
+        })
+        .emit(&mut out)
+        .ok();
         black_box(&out);
     }
-    rate("shield: encode RPYT packets", n as f64, "packets", t.elapsed().as_secs_f64());
+    rate(
+        "shield: encode RPYT packets",
+        n as f64,
+        "packets",
+        t.elapsed().as_secs_f64(),
+    );
 
     let mut stream = Vec::with_capacity(n * 8);
     for i in 0..n {
         let us = 1000 + (i % 1001) as u16;
-        RpytRepr(Pulses { roll: us, pitch: us, yaw: us, throttle: us }).emit(&mut out).ok();
+        RpytRepr(Pulses {
+            roll: us,
+            pitch: us,
+            yaw: us,
+            throttle: us,
+        })
+        .emit(&mut out)
+        .ok();
         stream.extend_from_slice(&out);
     }
     let mut r = Receiver::new();
@@ -61,28 +86,48 @@ fn shield(quick: bool) {
     let s = t.elapsed().as_secs_f64();
     assert_eq!(packets, n as u64);
     rate("shield: receive RPYT packets", packets as f64, "packets", s);
-    println!("{:<48} {:>12.1} MB/s\n", "shield: receive throughput", stream.len() as f64 / s / 1e6);
+    println!(
+        "{:<48} {:>12.1} MB/s\n",
+        "shield: receive throughput",
+        stream.len() as f64 / s / 1e6
+    );
 }
 
 fn mavlink_encode(quick: bool) {
     let n = if quick { 100_000 } else { 1_000_000 };
     let map = link::ChannelMap::ardupilot();
-    let ch = map.override_channels(&Sticks { roll: 0.1, pitch: 0.2, yaw: 0.3, throttle: 0.4 });
-    let msg = MavMessage::RC_CHANNELS_OVERRIDE(::mavlink::dialects::ardupilotmega::RC_CHANNELS_OVERRIDE_DATA {
-        chan1_raw: ch[0],
-        chan2_raw: ch[1],
-        chan3_raw: ch[2],
-        chan4_raw: ch[3],
-        target_system: 1,
-        target_component: 1,
-        ..Default::default()
+    let ch = map.override_channels(&Sticks {
+        roll: 0.1,
+        pitch: 0.2,
+        yaw: 0.3,
+        throttle: 0.4,
     });
+    let msg = MavMessage::RC_CHANNELS_OVERRIDE(
+        ::mavlink::dialects::ardupilotmega::RC_CHANNELS_OVERRIDE_DATA {
+            chan1_raw: ch[0],
+            chan2_raw: ch[1],
+            chan3_raw: ch[2],
+            chan4_raw: ch[3],
+            target_system: 1,
+            target_component: 1,
+            ..Default::default()
+        },
+    );
     let t = Instant::now();
     for i in 0..n {
-        let h = ::mavlink::MavHeader { system_id: 255, component_id: 190, sequence: i as u8 };
+        let h = ::mavlink::MavHeader {
+            system_id: 255,
+            component_id: 190,
+            sequence: i as u8,
+        };
         black_box(encode(MavlinkVersion::V2, h, &msg, None));
     }
-    rate("mavlink: encode RC_CHANNELS_OVERRIDE frames", n as f64, "frames", t.elapsed().as_secs_f64());
+    rate(
+        "mavlink: encode RC_CHANNELS_OVERRIDE frames",
+        n as f64,
+        "frames",
+        t.elapsed().as_secs_f64(),
+    );
 }
 
 fn tlog(quick: bool) {
@@ -97,7 +142,10 @@ fn tlog(quick: bool) {
     let mut msgs = 0;
     for _ in 0..runs {
         let t = Instant::now();
-        msgs = TlogReader::new(&bytes[..]).filter_map(Result::ok).filter(|r| r.frame.decode().is_ok()).count();
+        msgs = TlogReader::new(&bytes[..])
+            .filter_map(Result::ok)
+            .filter(|r| r.frame.decode().is_ok())
+            .count();
         best = best.min(t.elapsed().as_secs_f64());
     }
     println!(
@@ -126,7 +174,10 @@ while True:
         n += 1
 print(n, time.perf_counter() - t)
 "#;
-    match std::process::Command::new(&python).args(["-c", script, &path.to_string_lossy()]).output() {
+    match std::process::Command::new(&python)
+        .args(["-c", script, &path.to_string_lossy()])
+        .output()
+    {
         Ok(out) if out.status.success() => {
             let text = String::from_utf8_lossy(&out.stdout);
             let mut it = text.split_whitespace();
@@ -134,10 +185,21 @@ print(n, time.perf_counter() - t)
                 it.next().and_then(|x| x.parse().ok()).unwrap_or(0.0),
                 it.next().and_then(|x| x.parse().ok()).unwrap_or(f64::NAN),
             );
-            println!("{:<48} {:>12.0} msgs/s   ({n:.0} messages in {s:.3} s)", "tlog: read + decode (pymavlink 2.4.50)", n / s);
-            println!("{:<48} {:>12.1}x\n", "tlog: speed-up over pymavlink", (msgs as f64 / best) / (n / s));
+            println!(
+                "{:<48} {:>12.0} msgs/s   ({n:.0} messages in {s:.3} s)",
+                "tlog: read + decode (pymavlink 2.4.50)",
+                n / s
+            );
+            println!(
+                "{:<48} {:>12.1}x\n",
+                "tlog: speed-up over pymavlink",
+                (msgs as f64 / best) / (n / s)
+            );
         }
-        Ok(out) => println!("tlog: pymavlink failed: {}\n", String::from_utf8_lossy(&out.stderr)),
+        Ok(out) => println!(
+            "tlog: pymavlink failed: {}\n",
+            String::from_utf8_lossy(&out.stderr)
+        ),
         Err(e) => println!("tlog: pymavlink could not run: {e}\n"),
     }
 }
@@ -169,8 +231,14 @@ fn fake_vehicle(socket: UdpSocket, sysid: u8, stop: Arc<AtomicBool>) -> Vec<Inst
         }
         if let Some(p) = peer {
             if Instant::now() >= next_hb {
-                let h = ::mavlink::MavHeader { system_id: u32::from(sysid), component_id: 1, sequence: 0 };
-                socket.send_to(&encode(MavlinkVersion::V2, h, &hb, None), p).ok();
+                let h = ::mavlink::MavHeader {
+                    system_id: u32::from(sysid),
+                    component_id: 1,
+                    sequence: 0,
+                };
+                socket
+                    .send_to(&encode(MavlinkVersion::V2, h, &hb, None), p)
+                    .ok();
                 next_hb += Duration::from_secs(1);
             }
         }
@@ -183,16 +251,33 @@ fn rc_jitter(vehicles: usize, hz: f64, seconds: f64) {
     let mut threads = vec![];
     let mut links = vec![];
     for i in 0..vehicles {
-        let Ok(socket) = UdpSocket::bind("127.0.0.1:0") else { return };
-        let Ok(port) = socket.local_addr().map(|a| a.port()) else { return };
+        let Ok(socket) = UdpSocket::bind("127.0.0.1:0") else {
+            return;
+        };
+        let Ok(port) = socket.local_addr().map(|a| a.port()) else {
+            return;
+        };
         let st = stop.clone();
-        threads.push(std::thread::spawn(move || fake_vehicle(socket, i as u8 + 1, st)));
-        let config = MavlinkConfig { rc_rate_hz: hz, ..MavlinkConfig::default() };
-        let Ok(address) = format!("udpout:127.0.0.1:{port}").parse() else { return };
-        let Ok(link) = MavlinkLink::connect(&address, config) else { return };
+        threads.push(std::thread::spawn(move || {
+            fake_vehicle(socket, i as u8 + 1, st)
+        }));
+        let config = MavlinkConfig {
+            rc_rate_hz: hz,
+            ..MavlinkConfig::default()
+        };
+        let Ok(address) = format!("udpout:127.0.0.1:{port}").parse() else {
+            return;
+        };
+        let Ok(link) = MavlinkLink::connect(&address, config) else {
+            return;
+        };
         links.push(link);
     }
-    let vs: Vec<_> = links.iter().enumerate().map(|(i, l)| l.vehicle(i as u8 + 1)).collect();
+    let vs: Vec<_> = links
+        .iter()
+        .enumerate()
+        .map(|(i, l)| l.vehicle(i as u8 + 1))
+        .collect();
     let until = Instant::now() + Duration::from_secs(5);
     while vs.iter().any(|v| v.status().state != LinkState::Connected) && Instant::now() < until {
         std::thread::sleep(Duration::from_millis(10));
@@ -211,10 +296,16 @@ fn rc_jitter(vehicles: usize, hz: f64, seconds: f64) {
         let arrivals = t.join().unwrap_or_default();
         // Skip the first second (start-up) and the release frames at the end.
         let start = arrivals.first().copied();
-        let steady: Vec<Instant> =
-            arrivals.into_iter().filter(|a| start.is_some_and(|s| a.duration_since(s).as_secs_f64() > 1.0)).collect();
+        let steady: Vec<Instant> = arrivals
+            .into_iter()
+            .filter(|a| start.is_some_and(|s| a.duration_since(s).as_secs_f64() > 1.0))
+            .collect();
         frames += steady.len();
-        gaps.extend(steady.windows(2).map(|w| w[1].duration_since(w[0]).as_secs_f64()));
+        gaps.extend(
+            steady
+                .windows(2)
+                .map(|w| w[1].duration_since(w[0]).as_secs_f64()),
+        );
     }
     gaps.truncate(gaps.len().saturating_sub(vehicles * 3));
     if gaps.is_empty() {
@@ -226,8 +317,11 @@ fn rc_jitter(vehicles: usize, hz: f64, seconds: f64) {
     let mean = gaps.iter().sum::<f64>() / gaps.len() as f64;
     let dev: Vec<f64> = gaps.iter().map(|g| (g - period).abs() * 1e3).collect();
     let max_dev = dev.iter().copied().fold(0.0, f64::max);
-    let sd = (gaps.iter().map(|g| (g - mean).powi(2)).sum::<f64>() / gaps.len() as f64).sqrt() * 1e3;
-    println!("rc jitter: {vehicles} vehicles at {hz} Hz over loopback UDP for {seconds} s ({frames} frames measured)");
+    let sd =
+        (gaps.iter().map(|g| (g - mean).powi(2)).sum::<f64>() / gaps.len() as f64).sqrt() * 1e3;
+    println!(
+        "rc jitter: {vehicles} vehicles at {hz} Hz over loopback UDP for {seconds} s ({frames} frames measured)"
+    );
     println!(
         "  interval ms: mean {:.3}  sd {sd:.3}  p1 {:.3}  p50 {:.3}  p99 {:.3}  max |dev| {max_dev:.3} (nominal {:.1})",
         mean * 1e3,

@@ -123,6 +123,12 @@ pub enum CommandError {
         /// The link kind.
         backend: &'static str,
     },
+    /// The vehicle has not been heard on this link yet.
+    #[error("cannot {command}: the vehicle has not been heard on this link yet")]
+    NotConnected {
+        /// The command.
+        command: Command,
+    },
     /// The link was closed while the command was pending.
     #[error("link closed before {command} was answered")]
     Closed {

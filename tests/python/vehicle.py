@@ -26,10 +26,14 @@ def main():
     ap.add_argument("--seconds", type=float, default=20.0)
     ap.add_argument("--no-do-set-mode", action="store_true", help="answer DO_SET_MODE with UNSUPPORTED")
     ap.add_argument("--ignore-message-interval", action="store_true", help="never answer SET_MESSAGE_INTERVAL")
+    ap.add_argument("--signing-key", help="64 hex digits: sign everything, accept only signed frames")
     args = ap.parse_args()
 
     m = mavutil.mavlink_connection(args.connect, source_system=args.sysid, source_component=1, dialect="ardupilotmega")
     mav = m.mav
+    if args.signing_key:
+        m.setup_signing(bytes.fromhex(args.signing_key), sign_outgoing=True,
+                        allow_unsigned_callback=lambda _mav, _msg_id: False)
     report = {
         "overrides": [], "releases": 0, "gcs_heartbeats": 0, "commands": [], "set_mode_messages": 0,
         "data_stream_requests": 0, "armed_history": [], "mode_history": [], "gcs_sysid": None,

@@ -209,3 +209,116 @@ fn detects_loss_and_reconnects_when_the_vehicle_returns() {
         overrides(&r).len()
     );
 }
+
+#[test]
+fn two_vehicles_on_one_udp_port_are_told_apart_by_system_id() {
+    let transport = Transport::open(&"udpin:127.0.0.1:0".parse().expect("address")).expect("bind");
+    let port = transport.local_addr().expect("bound").port();
+    let one = PyVehicle::spawn(
+        &format!("udpout:127.0.0.1:{port}"),
+        &["--sysid", "1", "--seconds", "25"],
+    );
+    let two = PyVehicle::spawn(
+        &format!("udpout:127.0.0.1:{port}"),
+        &["--sysid", "2", "--seconds", "25"],
+    );
+    let link = MavlinkLink::start(transport, MavlinkConfig::default());
+    assert!(
+        eventually(20 * S, || link.vehicles() == vec![1, 2]),
+        "{:?}",
+        link.vehicles()
+    );
+    let (a, b) = (link.vehicle(1), link.vehicle(2));
+    a.command(Command::Arm).expect("arm 1");
+    b.command(Command::Arm).expect("arm 2");
+    a.set_sticks(Some(Sticks {
+        roll: 0.5,
+        ..Sticks::CENTRED
+    }));
+    b.set_sticks(Some(Sticks {
+        roll: -0.5,
+        ..Sticks::CENTRED
+    }));
+    std::thread::sleep(S);
+    a.set_sticks(None);
+    b.set_sticks(None);
+    std::thread::sleep(Duration::from_millis(300));
+    a.command(Command::Disarm).expect("disarm 1");
+    b.command(Command::Disarm).expect("disarm 2");
+    for (report, roll) in [(one.report(10 * S), 1700.0), (two.report(10 * S), 1300.0)] {
+        let o = overrides(&report);
+        assert!(o.len() >= 15, "{} overrides", o.len());
+        assert!(
+            o.iter().all(|row| row[1] == roll),
+            "each vehicle gets only its own sticks"
+        );
+        assert_eq!(report["armed_history"], serde_json::json!([true, false]));
+    }
+}
+
+const KEY: &str = "6b4a9e1f0c3d5e7a8b9c0d1e2f3a4b5c6d7e8f90a1b2c3d4e5f60718293a4b5c";
+
+fn signed_config(hex: &str) -> MavlinkConfig {
+    MavlinkConfig {
+        signing: Some(link::mavlink::SigningKey::from_hex(hex).expect("key")),
+        ..MavlinkConfig::default()
+    }
+}
+
+#[test]
+fn signing_lets_the_key_holder_fly_and_keeps_others_out() {
+    // Same key on both sides: flies.
+    let transport = Transport::open(&"udpin:127.0.0.1:0".parse().expect("address")).expect("bind");
+    let port = transport.local_addr().expect("bound").port();
+    let vehicle = PyVehicle::spawn(
+        &format!("udpout:127.0.0.1:{port}"),
+        &["--seconds", "20", "--signing-key", KEY],
+    );
+    let link = MavlinkLink::start(transport, signed_config(KEY));
+    let v = first_vehicle(&link);
+    v.command(Command::Arm).expect("signed arm");
+    v.command(Command::Disarm).expect("signed disarm");
+    assert_eq!(
+        vehicle.report(10 * S)["armed_history"],
+        serde_json::json!([true, false])
+    );
+    assert_eq!(link.rejected_signatures(), 0);
+    drop(link);
+
+    // A station with another key hears nothing it trusts.
+    let transport = Transport::open(&"udpin:127.0.0.1:0".parse().expect("address")).expect("bind");
+    let port = transport.local_addr().expect("bound").port();
+    let _vehicle = PyVehicle::spawn(
+        &format!("udpout:127.0.0.1:{port}"),
+        &["--seconds", "10", "--signing-key", KEY],
+    );
+    let wrong = KEY.replace('6', "7");
+    let link = MavlinkLink::start(transport, signed_config(&wrong));
+    assert!(link.wait_for_vehicle(4 * S).is_none());
+    assert!(
+        link.rejected_signatures() > 10,
+        "{}",
+        link.rejected_signatures()
+    );
+    drop(link);
+
+    // A station that does not sign is ignored by the signing vehicle.
+    let transport = Transport::open(&"udpin:127.0.0.1:0".parse().expect("address")).expect("bind");
+    let port = transport.local_addr().expect("bound").port();
+    let vehicle = PyVehicle::spawn(
+        &format!("udpout:127.0.0.1:{port}"),
+        &["--seconds", "8", "--signing-key", KEY],
+    );
+    let link = MavlinkLink::start(transport, MavlinkConfig::default());
+    let v = first_vehicle(&link);
+    assert!(matches!(
+        v.command(Command::Arm),
+        Err(link::CommandError::Timeout { attempts: 3, .. })
+    ));
+    let r = vehicle.report(15 * S);
+    assert_eq!(r["armed_history"], serde_json::json!([]));
+    assert_eq!(
+        r["gcs_heartbeats"], 0,
+        "unsigned heartbeats must be rejected"
+    );
+}

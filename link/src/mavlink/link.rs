@@ -384,10 +384,7 @@ impl VehicleLink for MavlinkVehicle {
         {
             let mut s = shared.lock();
             let Some(v) = s.vehicles.get(&self.system_id) else {
-                return Err(CommandError::Timeout {
-                    command,
-                    attempts: 0,
-                });
+                return Err(CommandError::NotConnected { command });
             };
             let (comp, ardupilot) = (v.component, v.is_ardupilot());
             let id = self.system_id;
