@@ -229,18 +229,18 @@ fn fake_vehicle(socket: UdpSocket, sysid: u8, stop: Arc<AtomicBool>) -> Vec<Inst
                 }
             }
         }
-        if let Some(p) = peer {
-            if Instant::now() >= next_hb {
-                let h = ::mavlink::MavHeader {
-                    system_id: u32::from(sysid),
-                    component_id: 1,
-                    sequence: 0,
-                };
-                socket
-                    .send_to(&encode(MavlinkVersion::V2, h, &hb, None), p)
-                    .ok();
-                next_hb += Duration::from_secs(1);
-            }
+        if let Some(p) = peer
+            && Instant::now() >= next_hb
+        {
+            let h = ::mavlink::MavHeader {
+                system_id: u32::from(sysid),
+                component_id: 1,
+                sequence: 0,
+            };
+            socket
+                .send_to(&encode(MavlinkVersion::V2, h, &hb, None), p)
+                .ok();
+            next_hb += Duration::from_secs(1);
         }
     }
     arrivals
