@@ -1,1 +1,1 @@
-//! placeholder
+//! Navigation: grids, inflation, frontiers, Hungarian assignment, planners, controllers. Not built yet: see issue #4.
