@@ -381,6 +381,39 @@ pub fn is_timeout(e: &io::Error) -> bool {
     ) || (e.kind() == io::ErrorKind::ConnectionRefused) // udpout before the peer listens
 }
 
+/// Runs one connection in both directions: `read` on a new thread, `write` on this one. Each gets
+/// the connection's `alive` flag; when either returns, or clears the flag, the other is ended too
+/// (a TCP socket is shut down so a blocked read returns at once).
+pub fn duplex(
+    conn: Connection,
+    name: &str,
+    read: impl FnOnce(Reader, &AtomicBool) + Send + 'static,
+    write: impl FnOnce(Writer, &AtomicBool),
+) {
+    let closer = conn.closer();
+    let Connection { reader, writer, .. } = conn;
+    let alive = Arc::new(AtomicBool::new(true));
+    let reader_thread = {
+        let alive = alive.clone();
+        std::thread::Builder::new()
+            .name(name.into())
+            .spawn(move || {
+                read(reader, &alive);
+                alive.store(false, Ordering::Relaxed);
+            })
+    };
+    if reader_thread.is_ok() {
+        write(writer, &alive);
+    } else {
+        tracing::error!("cannot start the {name} reader thread");
+    }
+    alive.store(false, Ordering::Relaxed);
+    closer.close();
+    if let Ok(t) = reader_thread {
+        let _ = t.join();
+    }
+}
+
 /// Keeps a transport connected until `stop`: runs `session` on every connection and reconnects
 /// with a growing back-off (100 ms to 2 s) when it ends or fails.
 pub fn run_sessions(

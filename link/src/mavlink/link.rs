@@ -25,7 +25,9 @@ use super::modes::{copter_custom_mode, copter_mode_name};
 use crate::address::Address;
 use crate::heartbeat::{HeartbeatMonitor, LinkState};
 use crate::rc::{ChannelMap, Sticks};
-use crate::transport::{Connection, Transport, TransportError, is_timeout, run_sessions};
+use crate::transport::{
+    Connection, Transport, TransportError, Writer, duplex, is_timeout, run_sessions,
+};
 use crate::vehicle::{
     Attitude, Battery, Command, CommandError, FlightMode, LinkStatus, StatusText, Telemetry,
     TextQueue, VehicleLink,
@@ -479,16 +481,18 @@ impl VehicleLink for MavlinkVehicle {
 
 /// One connection: a reader thread decodes, this thread writes on schedule.
 fn session(shared: &Arc<Shared>, conn: Connection) {
-    let Connection {
-        reader, mut writer, ..
-    } = conn;
-    let alive = Arc::new(AtomicBool::new(true));
-    let reader_thread = {
-        let (sh, al) = (shared.clone(), alive.clone());
-        std::thread::Builder::new()
-            .name("mavlink-rx".into())
-            .spawn(move || read_loop(&sh, reader, &al))
-    };
+    let sh = shared.clone();
+    duplex(
+        conn,
+        "mavlink-rx",
+        move |reader, alive| read_loop(&sh, reader, alive),
+        |writer, alive| write_loop(shared, writer, alive),
+    );
+}
+
+/// Sends heartbeats, queued messages, commands and RC overrides on schedule until the
+/// connection fails or the link stops (then releases every override first).
+fn write_loop(shared: &Shared, mut writer: Writer, alive: &AtomicBool) {
     let mut writer = Sender {
         writer: &mut writer,
         seq: 0,
@@ -572,10 +576,6 @@ fn session(shared: &Arc<Shared>, conn: Connection) {
             }
             std::thread::sleep(rc_period);
         }
-    }
-    alive.store(false, Ordering::Relaxed);
-    if let Ok(t) = reader_thread {
-        let _ = t.join();
     }
 }
 
@@ -809,7 +809,6 @@ fn read_loop(shared: &Shared, mut reader: Box<dyn Read + Send>, alive: &AtomicBo
             }
         }
     }
-    alive.store(false, Ordering::Relaxed);
 }
 
 fn handle_frame(shared: &Shared, frame: &RawFrame, now: Instant) {

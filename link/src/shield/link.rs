@@ -13,7 +13,9 @@ use super::wire::{FrameDecoder, RpytRepr, Special, UpRepr, special_bytes};
 use crate::address::Address;
 use crate::heartbeat::HeartbeatMonitor;
 use crate::rc::{ChannelMap, Sticks};
-use crate::transport::{Connection, Transport, TransportError, is_timeout, run_sessions};
+use crate::transport::{
+    Connection, Transport, TransportError, Writer, duplex, is_timeout, run_sessions,
+};
 use crate::vehicle::{
     Battery, Command, CommandError, FlightMode, LinkStatus, StatusText, Telemetry, TextQueue,
     VehicleLink,
@@ -157,20 +159,22 @@ impl Drop for ShieldLink {
 }
 
 fn session(shared: &Arc<Shared>, conn: Connection, stop: &AtomicBool) {
-    let Connection {
-        reader, mut writer, ..
-    } = conn;
-    let closer_alive = Arc::new(AtomicBool::new(true));
-    let reader_thread = {
-        let (sh, alive) = (shared.clone(), closer_alive.clone());
-        std::thread::Builder::new()
-            .name("shield-rx".into())
-            .spawn(move || read_loop(&sh, reader, &alive))
-    };
+    let sh = shared.clone();
+    duplex(
+        conn,
+        "shield-rx",
+        move |reader, alive| read_loop(&sh, reader, alive),
+        |writer, alive| write_loop(shared, writer, alive, stop),
+    );
+}
+
+/// Sends RPYT packets at the RC rate and special packets between them until the connection
+/// fails or the link stops.
+fn write_loop(shared: &Shared, mut writer: Writer, alive: &AtomicBool, stop: &AtomicBool) {
     let period = Duration::from_secs_f64(1.0 / shared.config.rc_rate_hz.clamp(10.0, 50.0));
     let mut next_rc = Instant::now();
     let mut out = Vec::with_capacity(64);
-    while !stop.load(Ordering::Relaxed) && closer_alive.load(Ordering::Relaxed) {
+    while !stop.load(Ordering::Relaxed) && alive.load(Ordering::Relaxed) {
         out.clear();
         {
             let mut s = shared.lock();
@@ -232,10 +236,6 @@ fn session(shared: &Arc<Shared>, conn: Connection, stop: &AtomicBool) {
             break;
         }
     }
-    closer_alive.store(false, Ordering::Relaxed);
-    if let Ok(t) = reader_thread {
-        let _ = t.join();
-    }
 }
 
 fn read_loop(shared: &Shared, mut reader: Box<dyn Read + Send>, alive: &AtomicBool) {
@@ -275,7 +275,6 @@ fn read_loop(shared: &Shared, mut reader: Box<dyn Read + Send>, alive: &AtomicBo
             }
         }
     }
-    alive.store(false, Ordering::Relaxed);
 }
 
 fn apply(s: &mut State, frame: UpRepr, now: Instant) {
