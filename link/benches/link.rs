@@ -38,20 +38,23 @@ fn rate(label: &str, n: f64, unit: &str, secs: f64) {
     );
 }
 
+/// The i-th packet of a sweep over every pulse width.
+fn packet(i: usize) -> RpytRepr {
+    let us = 1000 + (i % 1001) as u16;
+    RpytRepr(Pulses {
+        roll: us,
+        pitch: us,
+        yaw: us,
+        throttle: us,
+    })
+}
+
 fn shield(quick: bool) {
     let n = if quick { 200_000 } else { 2_000_000 };
     let mut out = [0u8; 8];
     let t = Instant::now();
     for i in 0..n {
-        let us = 1000 + (i % 1001) as u16;
-        RpytRepr(Pulses {
-            roll: us,
-            pitch: us,
-            yaw: us,
-            throttle: us,
-        })
-        .emit(&mut out)
-        .ok();
+        packet(i).emit(&mut out).ok();
         black_box(&out);
     }
     rate(
@@ -63,15 +66,7 @@ fn shield(quick: bool) {
 
     let mut stream = Vec::with_capacity(n * 8);
     for i in 0..n {
-        let us = 1000 + (i % 1001) as u16;
-        RpytRepr(Pulses {
-            roll: us,
-            pitch: us,
-            yaw: us,
-            throttle: us,
-        })
-        .emit(&mut out)
-        .ok();
+        packet(i).emit(&mut out).ok();
         stream.extend_from_slice(&out);
     }
     let mut r = Receiver::new();
