@@ -50,6 +50,9 @@ pub struct ProbeArgs {
     /// File with a 64-hex-digit MAVLink 2 signing key (sign and check every frame).
     #[arg(long)]
     signing_key: Option<PathBuf>,
+    /// Record every MAVLink frame in and out to this `.tlog` file.
+    #[arg(long, value_name = "FILE")]
+    tlog: Option<PathBuf>,
     /// One JSON object per line instead of text.
     #[arg(long)]
     json: bool,
@@ -180,6 +183,9 @@ pub fn run(args: &ProbeArgs) -> anyhow::Result<()> {
     };
     // Check all input before touching the vehicle.
     let rc = args.rc.as_deref().map(|s| parse_rc(s, &map)).transpose()?;
+    if args.tlog.is_some() && matches!(args.protocol, Protocol::Shield) {
+        bail!("--tlog records MAVLink frames; the shield protocol has none");
+    }
     let p = Printer {
         json: args.json,
         start: Instant::now(),
@@ -195,6 +201,11 @@ pub fn run(args: &ProbeArgs) -> anyhow::Result<()> {
                 config.signing = Some(SigningKey::from_hex(&text).map_err(anyhow::Error::msg)?);
             }
             let link = MavlinkLink::connect(&address, config)?;
+            if let Some(path) = &args.tlog {
+                link.record_to(path).with_context(|| {
+                    format!("cannot write the telemetry log {}", path.display())
+                })?;
+            }
             let vehicle = match args.sysid {
                 Some(id) => {
                     let v = link.vehicle(id);

@@ -105,6 +105,68 @@ fn probe_flies_a_pymavlink_vehicle_over_udp() {
 }
 
 #[test]
+fn probe_records_a_tlog_that_pymavlink_reads() {
+    let port = free_udp_port();
+    let dir = std::env::temp_dir().join(format!("probe-tlog-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let tlog = dir.join("session.tlog");
+    let v = PyVehicle::spawn(&format!("udpout:127.0.0.1:{port}"), &["--seconds", "25"]);
+    let out = gcs(&[
+        "link",
+        "probe",
+        &format!("udpin:127.0.0.1:{port}"),
+        "--arm",
+        "--rc",
+        "1500,1500,1500,1500",
+        "--seconds",
+        "1",
+        "--tlog",
+        &tlog.to_string_lossy(),
+        "--json",
+    ]);
+    assert_flew(&out);
+    drop(v);
+    let mut ours = std::collections::BTreeMap::new();
+    for rec in link::tlog::TlogReader::open(&tlog).expect("open tlog") {
+        let rec = rec.expect("record");
+        let name = rec
+            .frame
+            .decode()
+            .map(|m| ::mavlink::Message::message_name(&m))
+            .unwrap_or("?");
+        *ours
+            .entry((rec.frame.header().system_id, name))
+            .or_insert(0u32) += 1;
+    }
+    assert!(
+        ours[&(255, "HEARTBEAT")] >= 1 && ours[&(1, "HEARTBEAT")] >= 1,
+        "{ours:?}"
+    );
+    assert!(ours[&(255, "RC_CHANNELS_OVERRIDE")] >= 15, "{ours:?}");
+    assert!(
+        ours[&(255, "COMMAND_LONG")] >= 2 && ours[&(1, "COMMAND_ACK")] >= 2,
+        "{ours:?}"
+    );
+    let total: u32 = ours.values().sum();
+    let script = "import sys\nfrom pymavlink import mavutil\nm = mavutil.mavlink_connection(sys.argv[1])\nn = 0\nwhile m.recv_msg() is not None: n += 1\nprint(n)";
+    let py = Command::new(tests::python())
+        .args(["-c", script, &tlog.to_string_lossy()])
+        .output()
+        .expect("pymavlink");
+    assert!(
+        py.status.success(),
+        "{}",
+        String::from_utf8_lossy(&py.stderr)
+    );
+    let theirs: u32 = String::from_utf8_lossy(&py.stdout)
+        .trim()
+        .parse()
+        .expect("count");
+    assert_eq!(theirs, total, "pymavlink reads every record we wrote");
+    std::fs::remove_dir_all(&dir).expect("clean up");
+}
+
+#[test]
 fn probe_flies_a_pymavlink_vehicle_over_tcp() {
     let port = free_tcp_port();
     probe_pymavlink(

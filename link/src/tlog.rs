@@ -5,7 +5,9 @@
 
 use std::fs::File;
 use std::io::{self, BufReader, BufWriter, Read, Write};
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::sync::{Mutex, PoisonError};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use crate::mavlink::frame::{Check, MAX_FRAME, RawFrame, check};
 
@@ -175,6 +177,74 @@ impl<W: Write> TlogWriter<W> {
     }
 }
 
+/// Records a link's frames to a `.tlog` from any thread. Flushed at least every second, so a
+/// crash loses at most the last second; a write error is reported once and stops the recording,
+/// never the link.
+#[derive(Default)]
+pub struct Recorder {
+    inner: Mutex<Option<Recording>>,
+}
+
+struct Recording {
+    writer: TlogWriter<BufWriter<File>>,
+    path: PathBuf,
+    last_flush: Instant,
+}
+
+impl Recorder {
+    /// Starts recording to `path` (created or truncated), replacing any recording in progress.
+    pub fn start(&self, path: impl AsRef<Path>) -> io::Result<()> {
+        let path = path.as_ref().to_owned();
+        let writer = TlogWriter::create(&path)?;
+        let old = self.lock().replace(Recording {
+            writer,
+            path,
+            last_flush: Instant::now(),
+        });
+        if let Some(mut old) = old {
+            let _ = old.writer.flush();
+        }
+        Ok(())
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, Option<Recording>> {
+        self.inner.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Appends one frame, stamped now.
+    pub fn record(&self, frame: &[u8]) {
+        let mut guard = self.lock();
+        let Some(rec) = guard.as_mut() else { return };
+        let us = SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .map_or(0, |d| d.as_micros() as u64);
+        let mut result = rec.writer.write(us, frame);
+        if result.is_ok() && rec.last_flush.elapsed() >= Duration::from_secs(1) {
+            rec.last_flush = Instant::now();
+            result = rec.writer.flush();
+        }
+        if let Err(e) = result {
+            tracing::error!("telemetry log {} stopped: {e}", rec.path.display());
+            *guard = None;
+        }
+    }
+
+    /// Writes out everything recorded so far.
+    pub fn flush(&self) {
+        if let Some(rec) = self.lock().as_mut() {
+            if let Err(e) = rec.writer.flush() {
+                tracing::error!("telemetry log {}: {e}", rec.path.display());
+            }
+        }
+    }
+}
+
+impl Drop for Recorder {
+    fn drop(&mut self) {
+        self.flush();
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -290,6 +360,31 @@ mod tests {
         assert_eq!(recs.len(), 1);
         let m = recs[0].as_ref().unwrap().frame.decode().unwrap();
         assert!(matches!(m, MavMessage::BATTERY_STATUS(_)), "{m:?}");
+    }
+
+    #[test]
+    fn recorder_writes_a_readable_log_and_reports_a_bad_path() {
+        let dir = std::env::temp_dir().join(format!("tlog-recorder-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("session.tlog");
+        let r = Recorder::default();
+        r.record(&frame(0)); // not recording yet: ignored
+        r.start(&path).unwrap();
+        for i in 1..=3 {
+            r.record(&frame(i));
+        }
+        r.flush();
+        let recs: Vec<_> = TlogReader::open(&path)
+            .unwrap()
+            .map(Result::unwrap)
+            .collect();
+        assert_eq!(recs.len(), 3);
+        assert!(
+            recs[0].timestamp_us > 1_700_000_000_000_000
+                && recs[0].timestamp_us <= recs[2].timestamp_us
+        );
+        assert!(r.start(dir.join("no/such/dir/x.tlog")).is_err());
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -25,6 +25,7 @@ use super::modes::{copter_custom_mode, copter_mode_name};
 use crate::address::Address;
 use crate::heartbeat::{HeartbeatMonitor, LinkState};
 use crate::rc::{ChannelMap, Sticks};
+use crate::tlog::Recorder;
 use crate::transport::{
     Connection, Transport, TransportError, Writer, duplex, is_timeout, run_sessions,
 };
@@ -190,6 +191,7 @@ struct Shared {
     signing: Option<SigningData>,
     stop: AtomicBool,
     name: String,
+    recorder: Recorder,
 }
 
 impl Shared {
@@ -266,6 +268,7 @@ impl MavlinkLink {
             config,
             signing,
             stop: AtomicBool::new(false),
+            recorder: Recorder::default(),
         });
         let sh = shared.clone();
         let thread = std::thread::Builder::new()
@@ -327,6 +330,12 @@ impl MavlinkLink {
             rt: self.rt.clone(),
             system_id,
         }
+    }
+
+    /// Records every frame received and sent from now on to a `.tlog` file (as QGroundControl and
+    /// MAVProxy do), until the link closes or another recording starts.
+    pub fn record_to(&self, path: impl AsRef<std::path::Path>) -> std::io::Result<()> {
+        self.rt.shared.recorder.start(path)
     }
 
     /// Frames dropped because their signature was missing, wrong or replayed.
@@ -594,13 +603,10 @@ impl Sender<'_> {
             sequence: self.seq,
         };
         self.seq = self.seq.wrapping_add(1);
+        let frame = encode(cfg.version, header, msg, self.shared.signing.as_ref());
+        self.shared.recorder.record(&frame);
         // One write per frame: on UDP each write is one datagram.
-        self.writer.write_all(&encode(
-            cfg.version,
-            header,
-            msg,
-            self.shared.signing.as_ref(),
-        ))
+        self.writer.write_all(&frame)
     }
 }
 
@@ -812,6 +818,7 @@ fn read_loop(shared: &Shared, mut reader: Box<dyn Read + Send>, alive: &AtomicBo
 }
 
 fn handle_frame(shared: &Shared, frame: &RawFrame, now: Instant) {
+    shared.recorder.record(frame.bytes());
     if let Some(signing) = &shared.signing
         && !frame.verify(signing)
     {
