@@ -231,10 +231,10 @@ impl Recorder {
 
     /// Writes out everything recorded so far.
     pub fn flush(&self) {
-        if let Some(rec) = self.lock().as_mut() {
-            if let Err(e) = rec.writer.flush() {
-                tracing::error!("telemetry log {}: {e}", rec.path.display());
-            }
+        if let Some(rec) = self.lock().as_mut()
+            && let Err(e) = rec.writer.flush()
+        {
+            tracing::error!("telemetry log {}: {e}", rec.path.display());
         }
     }
 }
