@@ -1,1 +1,7 @@
-//! Navigation: grids, inflation, frontiers, Hungarian assignment, planners, controllers. Not built yet: see issue #4.
+//! Navigation for cooperative exploration, as plain functions over grids: inflation, frontiers,
+//! cost matrices, Hungarian assignment, global and local planners, controllers, and the mission
+//! planner step that ties them together (thesis §4.4, Algorithms 1–7).
+
+pub mod grid;
+
+pub use grid::{Cell, CellXY, Grid, MapError};
