@@ -3,5 +3,7 @@
 //! planner step that ties them together (thesis §4.4, Algorithms 1–7).
 
 pub mod grid;
+pub mod inflate;
+pub mod search;
 
 pub use grid::{Cell, CellXY, Grid, MapError};
