@@ -80,7 +80,13 @@ struct MapYaml {
 impl Grid {
     /// A grid of `width × height` cells of `resolution` metres, all `fill`.
     pub fn new(width: usize, height: usize, resolution: f64, origin: [f64; 2], fill: Cell) -> Self {
-        Self { width, height, resolution, origin, cells: vec![fill; width * height] }
+        Self {
+            width,
+            height,
+            resolution,
+            origin,
+            cells: vec![fill; width * height],
+        }
     }
 
     /// Cells across.
@@ -120,7 +126,11 @@ impl Grid {
 
     /// The cell at `(x, y)`; outside the grid counts as occupied (the outside of a building is solid).
     pub fn get(&self, (x, y): CellXY) -> Cell {
-        if x < self.width && y < self.height { self.cells[y * self.width + x] } else { Cell::Occupied }
+        if x < self.width && y < self.height {
+            self.cells[y * self.width + x]
+        } else {
+            Cell::Occupied
+        }
     }
 
     /// Sets a cell; outside the grid is ignored.
@@ -154,37 +164,79 @@ impl Grid {
     /// `occupied_thresh`, free below `free_thresh`, unknown between).
     pub fn load(yaml_path: impl AsRef<Path>) -> Result<Self, MapError> {
         let yaml_path = yaml_path.as_ref();
-        let text = std::fs::read_to_string(yaml_path).map_err(|source| MapError::Io { path: yaml_path.into(), source })?;
-        let yaml_err = |reason: String| MapError::Yaml { path: yaml_path.into(), reason };
+        let text = std::fs::read_to_string(yaml_path).map_err(|source| MapError::Io {
+            path: yaml_path.into(),
+            source,
+        })?;
+        let yaml_err = |reason: String| MapError::Yaml {
+            path: yaml_path.into(),
+            reason,
+        };
         let meta: MapYaml = serde_yaml_ng::from_str(&text).map_err(|e| yaml_err(e.to_string()))?;
         if !(meta.resolution.is_finite() && meta.resolution > 0.0) {
-            return Err(yaml_err(format!("resolution {} must be a positive number of metres", meta.resolution)));
+            return Err(yaml_err(format!(
+                "resolution {} must be a positive number of metres",
+                meta.resolution
+            )));
         }
         if meta.origin.iter().any(|v| !v.is_finite()) {
-            return Err(yaml_err("origin must be three finite numbers [x, y, yaw]".into()));
+            return Err(yaml_err(
+                "origin must be three finite numbers [x, y, yaw]".into(),
+            ));
         }
         if meta.origin[2] != 0.0 {
-            return Err(yaml_err(format!("origin yaw {} is not supported: rotate the image instead", meta.origin[2])));
+            return Err(yaml_err(format!(
+                "origin yaw {} is not supported: rotate the image instead",
+                meta.origin[2]
+            )));
         }
-        if !(0.0..=1.0).contains(&meta.free_thresh) || !(0.0..=1.0).contains(&meta.occupied_thresh) || meta.free_thresh > meta.occupied_thresh {
-            return Err(yaml_err("thresholds must satisfy 0 ≤ free_thresh ≤ occupied_thresh ≤ 1".into()));
+        if !(0.0..=1.0).contains(&meta.free_thresh)
+            || !(0.0..=1.0).contains(&meta.occupied_thresh)
+            || meta.free_thresh > meta.occupied_thresh
+        {
+            return Err(yaml_err(
+                "thresholds must satisfy 0 ≤ free_thresh ≤ occupied_thresh ≤ 1".into(),
+            ));
         }
         match meta.mode.as_deref() {
             None | Some("trinary") | Some("scale") => {}
-            Some(m) => return Err(yaml_err(format!("mode {m:?} is not supported (trinary or scale)"))),
+            Some(m) => {
+                return Err(yaml_err(format!(
+                    "mode {m:?} is not supported (trinary or scale)"
+                )));
+            }
         }
-        let image_path = yaml_path.parent().unwrap_or(Path::new(".")).join(&meta.image);
+        let image_path = yaml_path
+            .parent()
+            .unwrap_or(Path::new("."))
+            .join(&meta.image);
         let img = image::open(&image_path)
-            .map_err(|e| MapError::Image { path: image_path.clone(), reason: e.to_string() })?
+            .map_err(|e| MapError::Image {
+                path: image_path.clone(),
+                reason: e.to_string(),
+            })?
             .to_luma8();
         let (w, h) = (img.width() as usize, img.height() as usize);
         if w == 0 || h == 0 {
-            return Err(MapError::Image { path: image_path, reason: "the image is empty".into() });
+            return Err(MapError::Image {
+                path: image_path,
+                reason: "the image is empty".into(),
+            });
         }
-        let mut grid = Grid::new(w, h, meta.resolution, [meta.origin[0], meta.origin[1]], Cell::Unknown);
+        let mut grid = Grid::new(
+            w,
+            h,
+            meta.resolution,
+            [meta.origin[0], meta.origin[1]],
+            Cell::Unknown,
+        );
         for (px, py, Luma([v])) in img.enumerate_pixels() {
             let v = f64::from(*v);
-            let p = if meta.negate != 0 { v / 255.0 } else { (255.0 - v) / 255.0 };
+            let p = if meta.negate != 0 {
+                v / 255.0
+            } else {
+                (255.0 - v) / 255.0
+            };
             let c = if p > meta.occupied_thresh {
                 Cell::Occupied
             } else if p < meta.free_thresh {
@@ -213,13 +265,22 @@ impl Grid {
             img.put_pixel(x as u32, (self.height - 1 - y) as u32, Luma([v]));
         }
         img.save_with_format(&pgm_path, image::ImageFormat::Pnm)
-            .map_err(|e| MapError::Image { path: pgm_path.clone(), reason: e.to_string() })?;
-        let name = pgm_path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+            .map_err(|e| MapError::Image {
+                path: pgm_path.clone(),
+                reason: e.to_string(),
+            })?;
+        let name = pgm_path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
         let yaml = format!(
             "image: {name}\nresolution: {}\norigin: [{}, {}, 0.0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n",
             self.resolution, self.origin[0], self.origin[1]
         );
-        std::fs::write(yaml_path, yaml).map_err(|source| MapError::Io { path: yaml_path.into(), source })
+        std::fs::write(yaml_path, yaml).map_err(|source| MapError::Io {
+            path: yaml_path.into(),
+            source,
+        })
     }
 
     /// The map as a picture: free white, occupied black, unknown grey, north up, `scale` pixels
@@ -269,7 +330,9 @@ pub(crate) mod tests {
     }
 
     pub(crate) fn data(name: &str) -> PathBuf {
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/maps").join(name)
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../shared/data/maps")
+            .join(name)
     }
 
     #[test]
@@ -287,7 +350,10 @@ pub(crate) mod tests {
     #[test]
     fn real_maps_load_with_plausible_counts() {
         let willow = Grid::load(data("willow-full.yaml")).unwrap();
-        assert_eq!((willow.width(), willow.height(), willow.resolution()), (540, 587, 0.1));
+        assert_eq!(
+            (willow.width(), willow.height(), willow.resolution()),
+            (540, 587, 0.1)
+        );
         // Exactly what map_server's trinary rule gives for this file's pixels (counted in Python).
         // Its grey 206 is p = 49/255 = 0.192 < free_thresh 0.196, so map_server reads it as free.
         assert_eq!(willow.counts(), [300_466, 8_419, 8_095]);
@@ -322,7 +388,12 @@ pub(crate) mod tests {
         assert!(case("image: x.pgm\nresolution: 0.1\norigin: [0,0]\noccupied_thresh: 0.65\nfree_thresh: 0.2\n").contains("not a map_server"));
         assert!(case("image: missing.pgm\nresolution: 0.1\norigin: [0,0,0]\noccupied_thresh: 0.65\nfree_thresh: 0.2\n").contains("missing.pgm"));
         assert!(case("not: [valid").contains("not a map_server"));
-        assert!(Grid::load(dir.join("nope.yaml")).unwrap_err().to_string().contains("nope.yaml"));
+        assert!(
+            Grid::load(dir.join("nope.yaml"))
+                .unwrap_err()
+                .to_string()
+                .contains("nope.yaml")
+        );
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -11,7 +11,9 @@ use crate::grid::{Cell, Grid};
 pub fn inflate(grid: &Grid, radius_m: f64) -> Grid {
     let (w, h) = (grid.width() as u32, grid.height() as u32);
     let obstacles = GrayImage::from_fn(w, h, |x, y| {
-        Luma([u8::from(grid.get((x as usize, y as usize)) == Cell::Occupied)])
+        Luma([u8::from(
+            grid.get((x as usize, y as usize)) == Cell::Occupied,
+        )])
     });
     let d2 = euclidean_squared_distance_transform(&obstacles);
     let r_cells = radius_m.max(0.0) / grid.resolution();
@@ -34,20 +36,23 @@ mod tests {
     fn grows_walls_by_the_radius_and_keeps_unknown() {
         let g = grid(&[
             "?......", //
-            ".......",
-            "...#...",
-            ".......",
-            ".......",
+            ".......", "...#...", ".......", ".......",
         ]);
         // 0.1 m cells, radius 0.15 m: the 4-neighbours (0.1 m) are inside, diagonals (0.141) too,
         // two cells away (0.2 m) not.
         let i = inflate(&g, 0.15);
-        let occupied: Vec<_> = (0..i.cells().len()).filter(|&k| i.cells()[k] == Cell::Occupied).map(|k| i.xy(k)).collect();
+        let occupied: Vec<_> = (0..i.cells().len())
+            .filter(|&k| i.cells()[k] == Cell::Occupied)
+            .map(|k| i.xy(k))
+            .collect();
         assert_eq!(occupied.len(), 9);
         assert_eq!(i.get((0, 4)), Cell::Unknown);
         assert_eq!(i.get((3, 0)), Cell::Free);
         let i = inflate(&g, 0.21);
-        assert_eq!(i.cells().iter().filter(|c| **c == Cell::Occupied).count(), 13);
+        assert_eq!(
+            i.cells().iter().filter(|c| **c == Cell::Occupied).count(),
+            13
+        );
         assert_eq!(inflate(&g, 0.0), g);
     }
 }

@@ -2,6 +2,8 @@
 //! cost matrices, Hungarian assignment, global and local planners, controllers, and the mission
 //! planner step that ties them together (thesis §4.4, Algorithms 1–7).
 
+pub mod assignment;
+pub mod frontier;
 pub mod grid;
 pub mod inflate;
 pub mod search;

@@ -23,7 +23,16 @@ pub fn metres(grid: &Grid, cost: u32) -> f64 {
 
 /// The moves from a cell that stay on free cells and do not cut a corner: `(neighbour, cost)`.
 fn moves(grid: &Grid, (x, y): CellXY) -> impl Iterator<Item = (CellXY, u32)> + '_ {
-    const STEPS: [(isize, isize); 8] = [(1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1)];
+    const STEPS: [(isize, isize); 8] = [
+        (1, 0),
+        (-1, 0),
+        (0, 1),
+        (0, -1),
+        (1, 1),
+        (1, -1),
+        (-1, 1),
+        (-1, -1),
+    ];
     let free = move |dx: isize, dy: isize| {
         let (nx, ny) = (x as isize + dx, y as isize + dy);
         nx >= 0 && ny >= 0 && grid.get((nx as usize, ny as usize)) == Cell::Free
@@ -58,7 +67,10 @@ impl DistanceField {
 
     /// Cost to a cell ([`UNREACHABLE`] if it cannot be reached).
     pub fn cost(&self, (x, y): CellXY) -> u32 {
-        self.dist.get(y * self.width + x).copied().unwrap_or(UNREACHABLE)
+        self.dist
+            .get(y * self.width + x)
+            .copied()
+            .unwrap_or(UNREACHABLE)
     }
 
     /// The cells from the start to `goal`, both included; `None` if unreachable.
@@ -112,7 +124,12 @@ pub fn dijkstra(grid: &Grid, start: CellXY) -> DistanceField {
             cur += 1;
         }
     }
-    DistanceField { start, width: grid.width(), dist, parent }
+    DistanceField {
+        start,
+        width: grid.width(),
+        dist,
+        parent,
+    }
 }
 
 /// A* from `start` to `goal` over free cells with the octile heuristic; `None` if there is no path.
@@ -138,7 +155,12 @@ pub fn astar(grid: &Grid, start: CellXY, goal: CellXY) -> Option<(u32, Vec<CellX
         }
         let cell = grid.xy(u);
         if cell == goal {
-            let field = DistanceField { start, width: w, dist, parent };
+            let field = DistanceField {
+                start,
+                width: w,
+                dist,
+                parent,
+            };
             return field.path_to(goal).map(|p| (g, p));
         }
         for (v, c) in moves(grid, cell) {
@@ -186,8 +208,15 @@ pub fn nearest_free(grid: &Grid, from: CellXY, max_radius: usize) -> Option<Cell
 /// Whether the straight segment between two cell centres crosses only free cells (checked every
 /// quarter cell; the inflation margin covers what lies between the checks).
 pub fn line_of_sight(grid: &Grid, a: CellXY, b: CellXY) -> bool {
-    let (ax, ay, bx, by) = (a.0 as f64 + 0.5, a.1 as f64 + 0.5, b.0 as f64 + 0.5, b.1 as f64 + 0.5);
-    let steps = (((bx - ax).abs().max((by - ay).abs())) * 4.0).ceil().max(1.0) as usize;
+    let (ax, ay, bx, by) = (
+        a.0 as f64 + 0.5,
+        a.1 as f64 + 0.5,
+        b.0 as f64 + 0.5,
+        b.1 as f64 + 0.5,
+    );
+    let steps = (((bx - ax).abs().max((by - ay).abs())) * 4.0)
+        .ceil()
+        .max(1.0) as usize;
     (0..=steps).all(|k| {
         let t = k as f64 / steps as f64;
         let (x, y) = (ax + (bx - ax) * t, ay + (by - ay) * t);
@@ -198,7 +227,9 @@ pub fn line_of_sight(grid: &Grid, a: CellXY, b: CellXY) -> bool {
 /// Shortens a path to the waypoints where it must turn: from each waypoint, the farthest later
 /// cell still in line of sight. Keeps both ends.
 pub fn simplify(grid: &Grid, path: &[CellXY]) -> Vec<CellXY> {
-    let Some(&first) = path.first() else { return vec![] };
+    let Some(&first) = path.first() else {
+        return vec![];
+    };
     let mut out = vec![first];
     let mut i = 0;
     while i + 1 < path.len() {
@@ -223,8 +254,7 @@ mod tests {
     fn no_corner_cutting_and_diagonals_cost_root_two() {
         let g = grid(&[
             "...", //
-            ".#.",
-            "...",
+            ".#.", "...",
         ]);
         let f = dijkstra(&g, (0, 0));
         assert_eq!(f.cost((1, 0)), STRAIGHT);
@@ -260,9 +290,7 @@ mod tests {
     fn nearest_free_finds_the_closest() {
         let g = grid(&[
             "#####", //
-            "#####",
-            "##.##",
-            "####.",
+            "#####", "##.##", "####.",
         ]);
         assert_eq!(nearest_free(&g, (2, 3), 5), Some((2, 1)));
         assert_eq!(nearest_free(&g, (4, 0), 5), Some((4, 0)));

@@ -1,0 +1,213 @@
+//! Assigning robots to frontiers: the Hungarian algorithm (exact, O(n²·m)) and the greedy
+//! nearest-pair baseline.
+
+/// Minimum-cost assignment of rows (robots) to columns (frontiers): each row gets at most one
+/// column, each column at most one row, as many pairs as the smaller side, least total cost.
+/// Entries must be finite. Returns, per row, its column.
+pub fn hungarian(cost: &[Vec<f64>]) -> Vec<Option<usize>> {
+    let rows = cost.len();
+    let cols = cost.first().map_or(0, Vec::len);
+    if rows == 0 || cols == 0 {
+        return vec![None; rows];
+    }
+    if rows > cols {
+        // Solve the transpose: columns choose rows.
+        let t: Vec<Vec<f64>> = (0..cols)
+            .map(|c| (0..rows).map(|r| cost[r][c]).collect())
+            .collect();
+        let by_col = hungarian(&t);
+        let mut out = vec![None; rows];
+        for (c, r) in by_col.into_iter().enumerate() {
+            if let Some(r) = r {
+                out[r] = Some(c);
+            }
+        }
+        return out;
+    }
+    // Shortest augmenting paths with potentials (rows ≤ cols), 1-based with a virtual column 0.
+    let (n, m) = (rows, cols);
+    let mut u = vec![0.0f64; n + 1];
+    let mut v = vec![0.0f64; m + 1];
+    let mut owner = vec![0usize; m + 1]; // column → row (1-based), 0 = free
+    let mut way = vec![0usize; m + 1];
+    for i in 1..=n {
+        owner[0] = i;
+        let mut j0 = 0;
+        let mut minv = vec![f64::INFINITY; m + 1];
+        let mut used = vec![false; m + 1];
+        loop {
+            used[j0] = true;
+            let i0 = owner[j0];
+            let mut delta = f64::INFINITY;
+            let mut j1 = 0;
+            for j in 1..=m {
+                if !used[j] {
+                    let cur = cost[i0 - 1][j - 1] - u[i0] - v[j];
+                    if cur < minv[j] {
+                        minv[j] = cur;
+                        way[j] = j0;
+                    }
+                    if minv[j] < delta {
+                        delta = minv[j];
+                        j1 = j;
+                    }
+                }
+            }
+            for j in 0..=m {
+                if used[j] {
+                    u[owner[j]] += delta;
+                    v[j] -= delta;
+                } else {
+                    minv[j] -= delta;
+                }
+            }
+            j0 = j1;
+            if owner[j0] == 0 {
+                break;
+            }
+        }
+        loop {
+            let j1 = way[j0];
+            owner[j0] = owner[j1];
+            j0 = j1;
+            if j0 == 0 {
+                break;
+            }
+        }
+    }
+    let mut out = vec![None; n];
+    for j in 1..=m {
+        if owner[j] != 0 {
+            out[owner[j] - 1] = Some(j - 1);
+        }
+    }
+    out
+}
+
+/// The greedy baseline: repeatedly give the cheapest remaining (robot, frontier) pair.
+pub fn greedy(cost: &[Vec<f64>]) -> Vec<Option<usize>> {
+    let mut pairs: Vec<(f64, usize, usize)> = cost
+        .iter()
+        .enumerate()
+        .flat_map(|(r, row)| row.iter().enumerate().map(move |(c, &x)| (x, r, c)))
+        .collect();
+    pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut out = vec![None; cost.len()];
+    let mut taken = vec![false; cost.first().map_or(0, Vec::len)];
+    for (_, r, c) in pairs {
+        if out[r].is_none() && !taken[c] {
+            out[r] = Some(c);
+            taken[c] = true;
+        }
+    }
+    out
+}
+
+/// Total cost of an assignment.
+pub fn total(cost: &[Vec<f64>], assignment: &[Option<usize>]) -> f64 {
+    assignment
+        .iter()
+        .enumerate()
+        .filter_map(|(r, c)| c.map(|c| cost[r][c]))
+        .sum()
+}
+
+/// Pads a matrix to square with `fill` (dummy frontiers or dummy robots).
+pub fn pad_square(cost: &[Vec<f64>], fill: f64) -> Vec<Vec<f64>> {
+    let rows = cost.len();
+    let cols = cost.first().map_or(0, Vec::len);
+    let n = rows.max(cols);
+    (0..n)
+        .map(|r| {
+            (0..n)
+                .map(|c| {
+                    if r < rows && c < cols {
+                        cost[r][c]
+                    } else {
+                        fill
+                    }
+                })
+                .collect()
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn brute_force(cost: &[Vec<f64>]) -> f64 {
+        let rows = cost.len();
+        let cols = cost[0].len();
+        let k = rows.min(cols);
+        let mut best = f64::INFINITY;
+        // Every injective map from the smaller side to the larger.
+        fn rec(
+            cost: &[Vec<f64>],
+            r: usize,
+            used: &mut Vec<bool>,
+            acc: f64,
+            best: &mut f64,
+            transpose: bool,
+            k: usize,
+        ) {
+            if r == k {
+                *best = best.min(acc);
+                return;
+            }
+            for c in 0..used.len() {
+                if !used[c] {
+                    used[c] = true;
+                    let x = if transpose { cost[c][r] } else { cost[r][c] };
+                    rec(cost, r + 1, used, acc + x, best, transpose, k);
+                    used[c] = false;
+                }
+            }
+        }
+        let transpose = rows > cols;
+        let mut used = vec![false; rows.max(cols)];
+        rec(cost, 0, &mut used, 0.0, &mut best, transpose, k);
+        best
+    }
+
+    #[test]
+    fn classic_example() {
+        let c = vec![
+            vec![4.0, 1.0, 3.0],
+            vec![2.0, 0.0, 5.0],
+            vec![3.0, 2.0, 2.0],
+        ];
+        let a = hungarian(&c);
+        assert_eq!(total(&c, &a), 5.0);
+        // Greedy takes the 0 first and pays for it.
+        assert_eq!(total(&c, &greedy(&c)), 6.0);
+    }
+
+    #[test]
+    fn padding_makes_square() {
+        let p = pad_square(&[vec![1.0, 2.0, 3.0]], 0.0);
+        assert_eq!(p.len(), 3);
+        assert!(p.iter().all(|r| r.len() == 3));
+        assert_eq!(p[2], vec![0.0, 0.0, 0.0]);
+    }
+
+    proptest! {
+        #[test]
+        fn hungarian_equals_brute_force(
+            rows in 1usize..=6, cols in 1usize..=6,
+            values in proptest::collection::vec(0u32..1000, 36),
+        ) {
+            let cost: Vec<Vec<f64>> = (0..rows).map(|r| (0..cols).map(|c| f64::from(values[r * 6 + c]) / 10.0).collect()).collect();
+            let a = hungarian(&cost);
+            // A valid assignment of min(rows, cols) pairs, no column twice.
+            let mut seen = std::collections::HashSet::new();
+            prop_assert_eq!(a.iter().flatten().count(), rows.min(cols));
+            for c in a.iter().flatten() {
+                prop_assert!(seen.insert(*c));
+            }
+            prop_assert!((total(&cost, &a) - brute_force(&cost)).abs() < 1e-9);
+            prop_assert!(total(&cost, &greedy(&cost)) >= total(&cost, &a) - 1e-9);
+        }
+    }
+}
