@@ -311,11 +311,17 @@ impl Grid {
 pub(crate) mod tests {
     use super::*;
 
-    /// Builds a grid from rows of text, top row first: `.` free, `#` occupied, `?` unknown.
+    /// Builds a grid of 0.1 m cells from rows of text, top row first: `.` free, `#` occupied,
+    /// `?` unknown.
     pub(crate) fn grid(rows: &[&str]) -> Grid {
+        grid_with(rows, 0.1)
+    }
+
+    /// [`grid`] with another cell size.
+    pub(crate) fn grid_with(rows: &[&str], resolution: f64) -> Grid {
         let h = rows.len();
         let w = rows[0].len();
-        let mut g = Grid::new(w, h, 0.1, [0.0, 0.0], Cell::Unknown);
+        let mut g = Grid::new(w, h, resolution, [0.0, 0.0], Cell::Unknown);
         for (r, line) in rows.iter().enumerate() {
             for (x, ch) in line.chars().enumerate() {
                 let c = match ch {

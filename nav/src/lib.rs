@@ -6,6 +6,8 @@ pub mod assignment;
 pub mod frontier;
 pub mod grid;
 pub mod inflate;
+pub mod mission;
 pub mod search;
 
 pub use grid::{Cell, CellXY, Grid, MapError};
+pub use mission::{Plan, PlanError, PlannerConfig, RobotPlan, Strategy, explored_part, plan};

@@ -1,0 +1,463 @@
+//! The mission planner step (thesis §4.4, Algorithms 1–4): from the latest map and every robot's
+//! pose, each robot's frontier target and path, a hover, or "exploration complete".
+
+use crate::assignment::{greedy, hungarian, pad_square};
+use crate::frontier::{Frontier, frontiers};
+use crate::grid::{Cell, CellXY, Grid};
+use crate::inflate::inflate;
+use crate::search::{DistanceField, UNREACHABLE, dijkstra, metres, nearest_free, simplify};
+
+/// How robots are matched to frontiers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Strategy {
+    /// Least total cost (the Hungarian algorithm).
+    Hungarian,
+    /// Cheapest pair first (explore_lite-style baseline).
+    Greedy,
+}
+
+/// Planner settings.
+#[derive(Debug, Clone)]
+pub struct PlannerConfig {
+    /// Obstacles are grown by this much, metres.
+    pub robot_radius_m: f64,
+    /// Frontiers with fewer cells are ignored.
+    pub min_frontier_cells: usize,
+    /// Assignment strategy.
+    pub strategy: Strategy,
+}
+
+impl Default for PlannerConfig {
+    fn default() -> Self {
+        Self {
+            robot_radius_m: 0.3,
+            min_frontier_cells: 5,
+            strategy: Strategy::Hungarian,
+        }
+    }
+}
+
+/// What one robot should do.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RobotPlan {
+    /// Index of its frontier in [`Plan::frontiers`], `None` to hover.
+    pub frontier: Option<usize>,
+    /// Path length to it, metres.
+    pub cost_m: Option<f64>,
+    /// Waypoints from the robot to the target, map frame, metres (straight segments).
+    pub path: Vec<[f64; 2]>,
+    /// Why it hovers, when it does.
+    pub hover_reason: Option<&'static str>,
+}
+
+/// The result of one planner step.
+#[derive(Debug, Clone)]
+pub struct Plan {
+    /// The inflated map it planned on.
+    pub inflated: Grid,
+    /// The frontiers, largest first.
+    pub frontiers: Vec<Frontier>,
+    /// Robots × frontiers, metres, after the thesis's rules (unreachable → the largest finite cost,
+    /// invalid pose → largest + 10).
+    pub costs: Vec<Vec<f64>>,
+    /// Per robot, in input order.
+    pub robots: Vec<RobotPlan>,
+    /// No frontier is left that any robot with a valid pose can reach.
+    pub complete: bool,
+}
+
+/// A robot position the planner cannot use.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PlanError {
+    /// The position is outside the map.
+    #[error(
+        "robot {robot} at ({x:.2}, {y:.2}) m is outside the map ({min_x:.2}..{max_x:.2}, {min_y:.2}..{max_y:.2}) m"
+    )]
+    OutsideMap {
+        /// Robot index.
+        robot: usize,
+        /// Its x.
+        x: f64,
+        /// Its y.
+        y: f64,
+        /// Map extent.
+        min_x: f64,
+        /// Map extent.
+        max_x: f64,
+        /// Map extent.
+        min_y: f64,
+        /// Map extent.
+        max_y: f64,
+    },
+}
+
+/// One planner step. `robots[i]` is robot i's position in the map frame, `None` if its pose is
+/// invalid (it is planned to hover).
+pub fn plan(
+    map: &Grid,
+    robots: &[Option<[f64; 2]>],
+    config: &PlannerConfig,
+) -> Result<Plan, PlanError> {
+    let starts = robots
+        .iter()
+        .enumerate()
+        .map(|(robot, p)| match p {
+            None => Ok(None),
+            Some(p) => map.cell_of(*p).map(Some).ok_or_else(|| {
+                let o = map.origin();
+                PlanError::OutsideMap {
+                    robot,
+                    x: p[0],
+                    y: p[1],
+                    min_x: o[0],
+                    max_x: o[0] + map.width() as f64 * map.resolution(),
+                    min_y: o[1],
+                    max_y: o[1] + map.height() as f64 * map.resolution(),
+                }
+            }),
+        })
+        .collect::<Result<Vec<Option<CellXY>>, _>>()?;
+    let inflated = inflate(map, config.robot_radius_m);
+    let frontiers = frontiers(&inflated, config.min_frontier_cells);
+    // A robot inside the inflated band around a wall starts from the nearest free cell.
+    let reach = (config.robot_radius_m / map.resolution()).ceil() as usize * 2 + 2;
+    let fields: Vec<Option<DistanceField>> = starts
+        .iter()
+        .map(|s| {
+            s.and_then(|c| nearest_free(&inflated, c, reach))
+                .map(|c| dijkstra(&inflated, c))
+        })
+        .collect();
+    let raw: Vec<Vec<Option<f64>>> = fields
+        .iter()
+        .map(|f| {
+            frontiers
+                .iter()
+                .map(|fr| {
+                    f.as_ref()
+                        .map(|f| f.cost(fr.goal))
+                        .filter(|&c| c != UNREACHABLE)
+                        .map(|c| metres(&inflated, c))
+                })
+                .collect()
+        })
+        .collect();
+    let largest = raw.iter().flatten().flatten().copied().fold(0.0, f64::max);
+    let costs: Vec<Vec<f64>> = raw
+        .iter()
+        .zip(&fields)
+        .map(|(row, f)| {
+            row.iter()
+                .map(|c| {
+                    if f.is_none() {
+                        largest + 10.0
+                    } else {
+                        c.unwrap_or(largest)
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    let assignment = if frontiers.is_empty() {
+        vec![None; robots.len()]
+    } else {
+        match config.strategy {
+            Strategy::Hungarian => {
+                let mut a = hungarian(&pad_square(&costs, 0.0));
+                a.truncate(robots.len());
+                a.into_iter()
+                    .map(|c| c.filter(|&c| c < frontiers.len()))
+                    .collect()
+            }
+            Strategy::Greedy => {
+                // The baseline only considers pairs that can actually be flown.
+                let usable: Vec<Vec<f64>> = raw
+                    .iter()
+                    .map(|r| r.iter().map(|c| c.unwrap_or(f64::INFINITY)).collect())
+                    .collect();
+                greedy(&usable)
+            }
+        }
+    };
+    let robots_out = (0..robots.len())
+        .map(|r| {
+            let Some(field) = &fields[r] else {
+                return hover(if starts[r].is_none() {
+                    "pose invalid"
+                } else {
+                    "no free cell near the robot"
+                });
+            };
+            let Some(f) = assignment[r] else {
+                return hover(if frontiers.is_empty() {
+                    "no frontier"
+                } else {
+                    "no frontier left for this robot"
+                });
+            };
+            let (Some(cost), Some(cells)) = (raw[r][f], field.path_to(frontiers[f].goal)) else {
+                return hover("assigned frontier unreachable");
+            };
+            let path = simplify(&inflated, &cells)
+                .into_iter()
+                .map(|c| inflated.center_of(c))
+                .collect();
+            RobotPlan {
+                frontier: Some(f),
+                cost_m: Some(cost),
+                path,
+                hover_reason: None,
+            }
+        })
+        .collect();
+    let any_valid = fields.iter().any(Option::is_some);
+    let reachable = raw.iter().flatten().any(Option::is_some);
+    Ok(Plan {
+        inflated,
+        complete: any_valid && !reachable,
+        frontiers,
+        costs,
+        robots: robots_out,
+    })
+}
+
+fn hover(reason: &'static str) -> RobotPlan {
+    RobotPlan {
+        frontier: None,
+        cost_m: None,
+        path: vec![],
+        hover_reason: Some(reason),
+    }
+}
+
+/// What robots at `seeds` would have mapped of `world` after exploring everything within
+/// `radius_m` of travel: free cells reached through free space and the walls around them are
+/// known, the rest unknown. For tests, benchmarks and demonstrations on real building maps.
+pub fn explored_part(world: &Grid, seeds: &[[f64; 2]], radius_m: f64) -> Grid {
+    let mut known = Grid::new(
+        world.width(),
+        world.height(),
+        world.resolution(),
+        world.origin(),
+        Cell::Unknown,
+    );
+    let limit = (radius_m / world.resolution() * f64::from(crate::search::STRAIGHT)) as u32;
+    for seed in seeds {
+        let Some(cell) = world.cell_of(*seed) else {
+            continue;
+        };
+        let f = dijkstra(world, cell);
+        for i in 0..world.cells().len() {
+            let c = world.xy(i);
+            if f.cost(c) > limit {
+                continue;
+            }
+            known.set(c, Cell::Free);
+            for dy in -1isize..=1 {
+                for dx in -1isize..=1 {
+                    let (nx, ny) = (c.0 as isize + dx, c.1 as isize + dy);
+                    if nx >= 0 && ny >= 0 && world.get((nx as usize, ny as usize)) == Cell::Occupied
+                    {
+                        known.set((nx as usize, ny as usize), Cell::Occupied);
+                    }
+                }
+            }
+        }
+    }
+    known
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::grid::tests::{data, grid, grid_with};
+
+    fn toy() -> Grid {
+        // Two rooms, each with an opening into unknown space.
+        grid_with(
+            &[
+                "############################",
+                "#..........#...............?",
+                "#..........#...............?",
+                "#..........................?",
+                "#..........#...............?",
+                "?..........#...............#",
+                "?..........#...............#",
+                "?..........#...............#",
+                "############################",
+            ],
+            0.25,
+        )
+    }
+    #[test]
+    fn each_robot_goes_to_its_near_frontier() {
+        let g = toy();
+        let cfg = PlannerConfig {
+            robot_radius_m: 0.2,
+            min_frontier_cells: 2,
+            ..Default::default()
+        };
+        // Robot 0 in the left room, robot 1 in the right room.
+        let p = plan(&g, &[Some([1.0, 1.0]), Some([6.0, 1.0])], &cfg).unwrap();
+        assert_eq!(p.frontiers.len(), 2);
+        assert!(!p.complete);
+        let target = |r: usize| p.frontiers[p.robots[r].frontier.unwrap()].centroid;
+        assert!(
+            target(0)[0] < 1.0,
+            "left robot → left opening: {:?}",
+            target(0)
+        );
+        assert!(
+            target(1)[0] > 6.0,
+            "right robot → right opening: {:?}",
+            target(1)
+        );
+        for r in &p.robots {
+            let first = r.path.first().unwrap();
+            let last = r.path.last().unwrap();
+            assert!(r.cost_m.unwrap() > 0.0 && first != last);
+            // Every straight segment stays in free space of the inflated map.
+            for w in r.path.windows(2) {
+                let (a, b) = (
+                    p.inflated.cell_of(w[0]).unwrap(),
+                    p.inflated.cell_of(w[1]).unwrap(),
+                );
+                assert!(crate::search::line_of_sight(&p.inflated, a, b));
+            }
+        }
+        // Greedy gives the same here (the rooms are separate).
+        let g2 = plan(
+            &g,
+            &[Some([1.0, 1.0]), Some([6.0, 1.0])],
+            &PlannerConfig {
+                strategy: Strategy::Greedy,
+                ..cfg.clone()
+            },
+        )
+        .unwrap();
+        assert_eq!(
+            g2.robots.iter().map(|r| r.frontier).collect::<Vec<_>>(),
+            p.robots.iter().map(|r| r.frontier).collect::<Vec<_>>()
+        );
+    }
+
+    #[test]
+    fn invalid_pose_hovers_and_costs_largest_plus_ten() {
+        let g = toy();
+        let cfg = PlannerConfig {
+            robot_radius_m: 0.2,
+            min_frontier_cells: 2,
+            ..Default::default()
+        };
+        let p = plan(&g, &[None, Some([6.0, 1.0])], &cfg).unwrap();
+        assert_eq!(p.robots[0].hover_reason, Some("pose invalid"));
+        let largest = p.costs[1].iter().copied().fold(0.0, f64::max);
+        assert!(
+            p.costs[0]
+                .iter()
+                .all(|&c| (c - (largest + 10.0)).abs() < 1e-9)
+        );
+        assert!(p.robots[1].frontier.is_some());
+    }
+
+    #[test]
+    fn more_robots_than_frontiers_some_hover() {
+        let g = toy();
+        let cfg = PlannerConfig {
+            robot_radius_m: 0.2,
+            min_frontier_cells: 2,
+            ..Default::default()
+        };
+        let p = plan(
+            &g,
+            &[Some([1.0, 1.0]), Some([2.0, 1.0]), Some([6.0, 1.0])],
+            &cfg,
+        )
+        .unwrap();
+        let assigned: Vec<_> = p.robots.iter().filter_map(|r| r.frontier).collect();
+        assert_eq!(assigned.len(), 2);
+        assert_eq!(
+            p.robots.iter().filter(|r| r.hover_reason.is_some()).count(),
+            1
+        );
+    }
+
+    #[test]
+    fn explored_everything_is_complete_and_outside_is_an_error() {
+        let g = grid(&["#####", "#...#", "#####"]);
+        let p = plan(
+            &g,
+            &[Some([0.25, 0.15])],
+            &PlannerConfig {
+                robot_radius_m: 0.0,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert!(p.complete);
+        assert_eq!(p.robots[0].hover_reason, Some("no frontier"));
+        let e = plan(&g, &[Some([9.0, 0.1])], &PlannerConfig::default()).unwrap_err();
+        assert!(e.to_string().contains("outside the map"), "{e}");
+    }
+
+    #[test]
+    fn plans_on_real_buildings() {
+        for (file, seeds) in [
+            ("willow-full.yaml", vec![[12.0, 30.0], [20.0, 30.0]]),
+            ("building_31.yaml", vec![[0.0, 0.0], [5.0, 2.0]]),
+        ] {
+            let world = Grid::load(data(file)).unwrap();
+            let seeds: Vec<[f64; 2]> = seeds
+                .into_iter()
+                .map(|s| {
+                    let c = nearest_free(&world, world.cell_of(s).unwrap(), 50).unwrap();
+                    world.center_of(c)
+                })
+                .collect();
+            let known = explored_part(&world, &seeds, 8.0);
+            let robots: Vec<Option<[f64; 2]>> = seeds.iter().copied().map(Some).collect();
+            let p = plan(&known, &robots, &PlannerConfig::default()).unwrap();
+            assert!(
+                !p.frontiers.is_empty(),
+                "{file}: frontiers expected at the edge of what is explored"
+            );
+            assert!(!p.complete);
+            for (r, rp) in p.robots.iter().enumerate() {
+                assert!(
+                    rp.frontier.is_some(),
+                    "{file}: robot {r} hovers: {:?}",
+                    rp.hover_reason
+                );
+                for w in rp.path.windows(2) {
+                    let (a, b) = (
+                        p.inflated.cell_of(w[0]).unwrap(),
+                        p.inflated.cell_of(w[1]).unwrap(),
+                    );
+                    assert!(
+                        crate::search::line_of_sight(&p.inflated, a, b),
+                        "{file}: path through an obstacle"
+                    );
+                }
+            }
+            // The optimal total is no worse than greedy's.
+            let a: Vec<Option<usize>> = p.robots.iter().map(|r| r.frontier).collect();
+            let g = plan(
+                &known,
+                &robots,
+                &PlannerConfig {
+                    strategy: Strategy::Greedy,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            let b: Vec<Option<usize>> = g.robots.iter().map(|r| r.frontier).collect();
+            let cost = |x: &[Option<usize>]| crate::assignment::total(&p.costs, x);
+            assert!(
+                cost(&a) <= cost(&b) + 1e-9,
+                "{file}: Hungarian {} vs greedy {}",
+                cost(&a),
+                cost(&b)
+            );
+        }
+    }
+}
