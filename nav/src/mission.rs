@@ -1,11 +1,11 @@
 //! The mission planner step (thesis §4.4, Algorithms 1–4): from the latest map and every robot's
 //! pose, each robot's frontier target and path, a hover, or "exploration complete".
 
-use crate::assignment::{greedy, hungarian, pad_square};
+use crate::assignment::{greedy, hungarian};
 use crate::frontier::{Frontier, frontiers};
 use crate::grid::{Cell, CellXY, Grid};
 use crate::inflate::inflate;
-use crate::search::{DistanceField, UNREACHABLE, dijkstra, metres, nearest_free, simplify};
+use crate::search::{DistanceField, Graph, UNREACHABLE, dijkstra, metres, nearest_free, simplify};
 
 /// How robots are matched to frontiers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -121,13 +121,12 @@ pub fn plan(
     let frontiers = frontiers(&inflated, config.min_frontier_cells);
     // A robot inside the inflated band around a wall starts from the nearest free cell.
     let reach = (config.robot_radius_m / map.resolution()).ceil() as usize * 2 + 2;
-    let fields: Vec<Option<DistanceField>> = starts
+    let graph = Graph::new(&inflated);
+    let origins: Vec<Option<CellXY>> = starts
         .iter()
-        .map(|s| {
-            s.and_then(|c| nearest_free(&inflated, c, reach))
-                .map(|c| dijkstra(&inflated, c))
-        })
+        .map(|s| s.and_then(|c| nearest_free(&inflated, c, reach)))
         .collect();
+    let fields = search_all(&graph, &origins);
     let raw: Vec<Vec<Option<f64>>> = fields
         .iter()
         .map(|f| {
@@ -162,13 +161,9 @@ pub fn plan(
         vec![None; robots.len()]
     } else {
         match config.strategy {
-            Strategy::Hungarian => {
-                let mut a = hungarian(&pad_square(&costs, 0.0));
-                a.truncate(robots.len());
-                a.into_iter()
-                    .map(|c| c.filter(|&c| c < frontiers.len()))
-                    .collect()
-            }
+            // The thesis pads the matrix to square with zero-cost dummies; the rectangular solver
+            // reaches the same optimum without the O(n³) cost of the padding.
+            Strategy::Hungarian => hungarian(&costs),
             Strategy::Greedy => {
                 // The baseline only considers pairs that can actually be flown.
                 let usable: Vec<Vec<f64>> = raw
@@ -218,6 +213,30 @@ pub fn plan(
         frontiers,
         costs,
         robots: robots_out,
+    })
+}
+
+/// One Dijkstra per robot, spread over the available cores.
+fn search_all(graph: &Graph, origins: &[Option<CellXY>]) -> Vec<Option<DistanceField>> {
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .min(origins.len().max(1));
+    let chunk = origins.len().div_ceil(threads).max(1);
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = origins
+            .chunks(chunk)
+            .map(|part| {
+                scope.spawn(move || {
+                    part.iter()
+                        .map(|o| o.map(|c| graph.dijkstra(c)))
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+            .collect()
     })
 }
 

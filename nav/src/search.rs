@@ -21,6 +21,102 @@ pub fn metres(grid: &Grid, cost: u32) -> f64 {
     f64::from(cost) / f64::from(STRAIGHT) * grid.resolution()
 }
 
+/// The free cells of a grid with a one-cell border of obstacles, so that neighbours are found by
+/// flat-index arithmetic with no bounds checks. Build it once and search from many starts.
+#[derive(Debug, Clone)]
+pub struct Graph {
+    width: usize,
+    height: usize,
+    /// Padded width: `width + 2`.
+    stride: usize,
+    free: Vec<bool>,
+}
+
+impl Graph {
+    /// The graph of a grid's free cells.
+    pub fn new(grid: &Grid) -> Self {
+        let (w, h) = (grid.width(), grid.height());
+        let stride = w + 2;
+        let mut free = vec![false; stride * (h + 2)];
+        for (i, c) in grid.cells().iter().enumerate() {
+            if *c == Cell::Free {
+                free[(i / w + 1) * stride + i % w + 1] = true;
+            }
+        }
+        Self {
+            width: w,
+            height: h,
+            stride,
+            free,
+        }
+    }
+
+    /// Dijkstra from `start` over free cells (the start cell itself may be anything), as a bucket
+    /// queue: every step costs 1000 or 1414, so 1415 buckets in a ring hold every pending distance.
+    pub fn dijkstra(&self, start: CellXY) -> DistanceField {
+        let n = self.free.len();
+        let mut field = DistanceField {
+            start,
+            stride: self.stride,
+            width: self.width,
+            height: self.height,
+            dist: vec![UNREACHABLE; n],
+            parent: vec![u32::MAX; n],
+        };
+        let Some(s) = field.padded(start) else {
+            return field;
+        };
+        let (dist, parent) = (&mut field.dist, &mut field.parent);
+        let st = self.stride as isize;
+        // (offset, cost, the two orthogonal cells a diagonal step passes)
+        let steps: [(isize, u32, isize, isize); 8] = [
+            (1, STRAIGHT, 0, 0),
+            (-1, STRAIGHT, 0, 0),
+            (st, STRAIGHT, 0, 0),
+            (-st, STRAIGHT, 0, 0),
+            (st + 1, DIAGONAL, 1, st),
+            (st - 1, DIAGONAL, -1, st),
+            (-st + 1, DIAGONAL, 1, -st),
+            (-st - 1, DIAGONAL, -1, -st),
+        ];
+        let ring = DIAGONAL as usize + 1;
+        let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); ring];
+        dist[s] = 0;
+        buckets[0].push(s as u32);
+        let mut pending = 1usize;
+        let mut cur = 0u32;
+        while pending > 0 {
+            let b = cur as usize % ring;
+            while let Some(u) = buckets[b].pop() {
+                pending -= 1;
+                let u = u as usize;
+                if dist[u] != cur {
+                    continue; // stale: reached cheaper since
+                }
+                for &(off, w, a, c) in &steps {
+                    // A free cell is never on the border, so u ± 1 and u ± stride stay inside.
+                    let v = u.wrapping_add_signed(off);
+                    let corner_ok = w == STRAIGHT
+                        || (self.free[u.wrapping_add_signed(a)]
+                            && self.free[u.wrapping_add_signed(c)]);
+                    if !self.free[v] || !corner_ok {
+                        continue;
+                    }
+                    let nd = cur + w;
+                    if nd < dist[v] {
+                        dist[v] = nd;
+                        parent[v] = u as u32;
+                        buckets[nd as usize % ring].push(v as u32);
+                        pending += 1;
+                    }
+                }
+            }
+            cur += 1;
+        }
+        field
+    }
+}
+
 /// The moves from a cell that stay on free cells and do not cut a corner: `(neighbour, cost)`.
 fn moves(grid: &Grid, (x, y): CellXY) -> impl Iterator<Item = (CellXY, u32)> + '_ {
     const STEPS: [(isize, isize); 8] = [
@@ -54,7 +150,9 @@ fn moves(grid: &Grid, (x, y): CellXY) -> impl Iterator<Item = (CellXY, u32)> + '
 #[derive(Debug, Clone)]
 pub struct DistanceField {
     start: CellXY,
+    stride: usize,
     width: usize,
+    height: usize,
     dist: Vec<u32>,
     parent: Vec<u32>,
 }
@@ -65,71 +163,35 @@ impl DistanceField {
         self.start
     }
 
+    fn padded(&self, (x, y): CellXY) -> Option<usize> {
+        (x < self.width && y < self.height).then(|| (y + 1) * self.stride + x + 1)
+    }
+
     /// Cost to a cell ([`UNREACHABLE`] if it cannot be reached).
-    pub fn cost(&self, (x, y): CellXY) -> u32 {
-        self.dist
-            .get(y * self.width + x)
-            .copied()
-            .unwrap_or(UNREACHABLE)
+    pub fn cost(&self, cell: CellXY) -> u32 {
+        self.padded(cell).map_or(UNREACHABLE, |i| self.dist[i])
     }
 
     /// The cells from the start to `goal`, both included; `None` if unreachable.
     pub fn path_to(&self, goal: CellXY) -> Option<Vec<CellXY>> {
-        if self.cost(goal) == UNREACHABLE {
+        let mut i = self.padded(goal)?;
+        if self.dist[i] == UNREACHABLE {
             return None;
         }
-        let mut i = goal.1 * self.width + goal.0;
         let mut path = vec![goal];
         while self.parent[i] != u32::MAX {
             i = self.parent[i] as usize;
-            path.push((i % self.width, i / self.width));
+            path.push((i % self.stride - 1, i / self.stride - 1));
         }
         path.reverse();
         Some(path)
     }
 }
 
-/// Dijkstra from `start` over free cells (the start cell itself may be anything).
+/// Dijkstra from `start` over free cells (the start cell itself may be anything). To search from
+/// several starts on one grid, build a [`Graph`] once.
 pub fn dijkstra(grid: &Grid, start: CellXY) -> DistanceField {
-    let n = grid.width() * grid.height();
-    let mut dist = vec![UNREACHABLE; n];
-    let mut parent = vec![u32::MAX; n];
-    let buckets_n = DIAGONAL as usize + 1;
-    let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); buckets_n];
-    if start.0 < grid.width() && start.1 < grid.height() {
-        let s = grid.index(start);
-        dist[s] = 0;
-        buckets[0].push(s as u32);
-        let mut pending = 1usize;
-        let mut cur = 0u32;
-        while pending > 0 {
-            let b = cur as usize % buckets_n;
-            while let Some(u) = buckets[b].pop() {
-                pending -= 1;
-                let u = u as usize;
-                if dist[u] != cur {
-                    continue; // a stale entry: the cell was reached cheaper since
-                }
-                for (v, w) in moves(grid, grid.xy(u)) {
-                    let vi = grid.index(v);
-                    let nd = cur + w;
-                    if nd < dist[vi] {
-                        dist[vi] = nd;
-                        parent[vi] = u as u32;
-                        buckets[nd as usize % buckets_n].push(vi as u32);
-                        pending += 1;
-                    }
-                }
-            }
-            cur += 1;
-        }
-    }
-    DistanceField {
-        start,
-        width: grid.width(),
-        dist,
-        parent,
-    }
+    Graph::new(grid).dijkstra(start)
 }
 
 /// A* from `start` to `goal` over free cells with the octile heuristic; `None` if there is no path.
@@ -155,13 +217,14 @@ pub fn astar(grid: &Grid, start: CellXY, goal: CellXY) -> Option<(u32, Vec<CellX
         }
         let cell = grid.xy(u);
         if cell == goal {
-            let field = DistanceField {
-                start,
-                width: w,
-                dist,
-                parent,
-            };
-            return field.path_to(goal).map(|p| (g, p));
+            let mut path = vec![goal];
+            let mut i = u;
+            while parent[i] != u32::MAX {
+                i = parent[i] as usize;
+                path.push(grid.xy(i));
+            }
+            path.reverse();
+            return Some((g, path));
         }
         for (v, c) in moves(grid, cell) {
             let vi = grid.index(v);
@@ -224,22 +287,36 @@ pub fn line_of_sight(grid: &Grid, a: CellXY, b: CellXY) -> bool {
     })
 }
 
-/// Shortens a path to the waypoints where it must turn: from each waypoint, the farthest later
-/// cell still in line of sight. Keeps both ends.
+/// Shortens a path to straight segments that stay on free cells: from each waypoint, jump to a
+/// far cell still in line of sight (found by doubling then bisecting, so a long path costs
+/// O(L log L) checks rather than O(L²)). Keeps both ends; every segment is checked clear.
 pub fn simplify(grid: &Grid, path: &[CellXY]) -> Vec<CellXY> {
     let Some(&first) = path.first() else {
         return vec![];
     };
     let mut out = vec![first];
     let mut i = 0;
-    while i + 1 < path.len() {
-        let mut j = i + 1;
-        // Step forward while the segment stays clear (paths are a few hundred cells: linear scan).
-        while j + 1 < path.len() && line_of_sight(grid, path[i], path[j + 1]) {
-            j += 1;
+    let last = path.len() - 1;
+    while i < last {
+        // Doubling: the largest i + 2^k still in sight (i + 1 always is: path steps are adjacent).
+        let mut good = i + 1;
+        let mut step = 2;
+        while i + step <= last && line_of_sight(grid, path[i], path[i + step]) {
+            good = i + step;
+            step *= 2;
         }
-        out.push(path[j]);
-        i = j;
+        // Bisect between the last good and the first bad (or the end).
+        let mut bad = (i + step).min(last + 1);
+        while bad - good > 1 {
+            let mid = (good + bad) / 2;
+            if line_of_sight(grid, path[i], path[mid]) {
+                good = mid;
+            } else {
+                bad = mid;
+            }
+        }
+        out.push(path[good]);
+        i = good;
     }
     out
 }
