@@ -1,5 +1,6 @@
 //! `gcs`: the ground control station.
 
+mod plan;
 mod probe;
 
 use std::process::ExitCode;
@@ -16,6 +17,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Top {
+    /// One mission-planner step on a map: frontiers, assignment, paths.
+    Plan(plan::PlanArgs),
     /// Talk to one vehicle link.
     Link {
         #[command(subcommand)]
@@ -39,6 +42,7 @@ fn main() -> ExitCode {
         .init();
     let cli = Cli::parse();
     let result = match cli.command {
+        Top::Plan(args) => plan::run(&args),
         Top::Link {
             command: LinkCommand::Probe(args),
         } => probe::run(&args),

@@ -7,6 +7,7 @@ pub mod frontier;
 pub mod grid;
 pub mod inflate;
 pub mod mission;
+pub mod render;
 pub mod search;
 
 pub use grid::{Cell, CellXY, Grid, MapError};

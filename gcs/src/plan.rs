@@ -1,0 +1,196 @@
+//! `gcs plan`: one mission-planner step on a map file, for given robot positions.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use clap::{Args, ValueEnum};
+use nav::{Grid, PlannerConfig, Strategy, explored_part, plan};
+use serde_json::json;
+
+/// Assignment strategy on the command line.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum StrategyArg {
+    /// Least total path length (Hungarian algorithm).
+    Hungarian,
+    /// Cheapest pair first (explore_lite-style baseline).
+    Greedy,
+}
+
+/// Arguments of `gcs plan`.
+#[derive(Args, Debug)]
+pub struct PlanArgs {
+    /// The map: a ROS map_server YAML (with its PGM or PNG beside it).
+    #[arg(long)]
+    map: PathBuf,
+    /// A robot's position X,Y in metres (map frame); repeat for each robot; `none` for a robot
+    /// whose pose is invalid.
+    #[arg(long = "robot", value_name = "X,Y", required = true)]
+    robots: Vec<String>,
+    /// Obstacles are grown by this radius, metres.
+    #[arg(long, default_value_t = 0.3)]
+    robot_radius: f64,
+    /// Frontiers with fewer cells are ignored.
+    #[arg(long, default_value_t = 5)]
+    min_frontier: usize,
+    /// Assignment strategy.
+    #[arg(long, value_enum, default_value = "hungarian")]
+    strategy: StrategyArg,
+    /// Treat the map as the whole building and plan on what the robots would have explored within
+    /// this many metres of travel from their positions (to try the planner on a complete map).
+    #[arg(long, value_name = "METRES")]
+    explored_radius: Option<f64>,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    json: bool,
+    /// Draw the map, frontiers, targets and paths to this PNG.
+    #[arg(long, value_name = "OUT.png")]
+    png: Option<PathBuf>,
+}
+
+fn parse_robot(s: &str) -> anyhow::Result<Option<[f64; 2]>> {
+    if s.eq_ignore_ascii_case("none") {
+        return Ok(None);
+    }
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .with_context(|| {
+            format!("--robot {s:?}: expected X,Y in metres, e.g. 1.5,-2.0, or none")
+        })?;
+    match v[..] {
+        [x, y] if x.is_finite() && y.is_finite() => Ok(Some([x, y])),
+        _ => bail!("--robot {s:?}: expected two finite numbers X,Y, or none"),
+    }
+}
+
+/// Runs the command.
+pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
+    let robots: Vec<Option<[f64; 2]>> = args
+        .robots
+        .iter()
+        .map(|s| parse_robot(s))
+        .collect::<Result<_, _>>()?;
+    if !(args.robot_radius.is_finite() && args.robot_radius >= 0.0) {
+        bail!("--robot-radius must be zero or more metres");
+    }
+    let mut map = Grid::load(&args.map)?;
+    if let Some(r) = args.explored_radius {
+        if !(r.is_finite() && r > 0.0) {
+            bail!("--explored-radius must be more than zero metres");
+        }
+        let seeds: Vec<[f64; 2]> = robots.iter().flatten().copied().collect();
+        map = explored_part(&map, &seeds, r);
+    }
+    let config = PlannerConfig {
+        robot_radius_m: args.robot_radius,
+        min_frontier_cells: args.min_frontier.max(1),
+        strategy: match args.strategy {
+            StrategyArg::Hungarian => Strategy::Hungarian,
+            StrategyArg::Greedy => Strategy::Greedy,
+        },
+    };
+    let t = std::time::Instant::now();
+    let p = plan(&map, &robots, &config)?;
+    let elapsed = t.elapsed().as_secs_f64();
+    let total: f64 = p.robots.iter().filter_map(|r| r.cost_m).sum();
+    if args.json {
+        let frontiers: Vec<_> = p
+            .frontiers
+            .iter()
+            .map(|f| {
+                let g = p.inflated.center_of(f.goal);
+                json!({"x": g[0], "y": g[1], "size": f.cells, "centroid": {"x": f.centroid[0], "y": f.centroid[1]}})
+            })
+            .collect();
+        let robots_json: Vec<_> = p
+            .robots
+            .iter()
+            .enumerate()
+            .map(|(id, r)| {
+                let target = r.frontier.map(|f| {
+                    let g = p.inflated.center_of(p.frontiers[f].goal);
+                    json!({"x": g[0], "y": g[1]})
+                });
+                json!({
+                    "id": id,
+                    "position": robots[id].map(|p| json!({"x": p[0], "y": p[1]})),
+                    "frontier": r.frontier,
+                    "target": target,
+                    "cost": r.cost_m,
+                    "path": r.path,
+                    "hover_reason": r.hover_reason,
+                })
+            })
+            .collect();
+        let out = json!({
+            "frontiers": frontiers,
+            "robots": robots_json,
+            "cost_matrix": p.costs,
+            "total_cost": total,
+            "complete": p.complete,
+            "planning_time_s": elapsed,
+        });
+        println!("{out}");
+    } else {
+        println!(
+            "{} frontiers ({} × {} cells of {} m), planned in {:.1} ms",
+            p.frontiers.len(),
+            map.width(),
+            map.height(),
+            map.resolution(),
+            elapsed * 1e3
+        );
+        for (i, f) in p.frontiers.iter().enumerate().take(20) {
+            let g = p.inflated.center_of(f.goal);
+            println!(
+                "  frontier {i:>3}: {:>5} cells, goal ({:7.2}, {:7.2}) m",
+                f.cells, g[0], g[1]
+            );
+        }
+        if p.frontiers.len() > 20 {
+            println!("  … {} more", p.frontiers.len() - 20);
+        }
+        if !p.frontiers.is_empty() && p.frontiers.len() <= 12 {
+            println!("cost matrix (m), robots × frontiers:");
+            for (i, row) in p.costs.iter().enumerate() {
+                let cells: Vec<String> = row.iter().map(|c| format!("{c:7.2}")).collect();
+                println!("  robot {i}: {}", cells.join(" "));
+            }
+        }
+        for (i, r) in p.robots.iter().enumerate() {
+            match (r.frontier, r.cost_m) {
+                (Some(f), Some(c)) => {
+                    let g = p.inflated.center_of(p.frontiers[f].goal);
+                    println!(
+                        "robot {i} → frontier {f} at ({:.2}, {:.2}) m, path {c:.2} m, {} waypoints",
+                        g[0],
+                        g[1],
+                        r.path.len()
+                    );
+                }
+                _ => println!(
+                    "robot {i}: hover ({})",
+                    r.hover_reason.unwrap_or("no target")
+                ),
+            }
+        }
+        println!(
+            "total path length {total:.2} m{}",
+            if p.complete {
+                "; exploration complete"
+            } else {
+                ""
+            }
+        );
+    }
+    if let Some(out) = &args.png {
+        let img = nav::render::draw_plan(&map, &p, &robots, 1000);
+        img.save(out)
+            .with_context(|| format!("cannot write {}", out.display()))?;
+        if !args.json {
+            println!("picture: {}", out.display());
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,173 @@
+//! `gcs plan` as a user runs it, on the real building maps.
+
+use std::process::{Command, Output};
+
+use serde_json::Value;
+
+fn gcs(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_gcs"))
+        .args(args)
+        .output()
+        .expect("run gcs")
+}
+
+fn map(name: &str) -> String {
+    format!(
+        "{}/../../shared/data/maps/{name}",
+        env!("CARGO_MANIFEST_DIR")
+    )
+}
+
+/// The least total over every way of giving distinct frontiers to the robots.
+fn brute_force(costs: &[Vec<f64>]) -> f64 {
+    fn rec(costs: &[Vec<f64>], r: usize, used: &mut Vec<bool>) -> f64 {
+        if r == costs.len() {
+            return 0.0;
+        }
+        let mut best = f64::INFINITY;
+        for c in 0..used.len() {
+            if !used[c] {
+                used[c] = true;
+                best = best.min(costs[r][c] + rec(costs, r + 1, used));
+                used[c] = false;
+            }
+        }
+        best
+    }
+    rec(costs, 0, &mut vec![false; costs[0].len()])
+}
+
+#[test]
+fn plans_optimally_on_willow_and_draws_it() {
+    let dir = std::env::temp_dir().join(format!("plan-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let png = dir.join("plan.png");
+    let out = gcs(&[
+        "plan",
+        "--map",
+        &map("willow-full.yaml"),
+        "--robot",
+        "12,30",
+        "--robot",
+        "20,30",
+        "--robot",
+        "30,22",
+        "--explored-radius",
+        "12",
+        "--min-frontier",
+        "20",
+        "--json",
+        "--png",
+        &png.to_string_lossy(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    let frontiers = v["frontiers"].as_array().expect("frontiers");
+    assert!(frontiers.len() >= 3, "{} frontiers", frontiers.len());
+    assert!(
+        frontiers
+            .iter()
+            .all(|f| f["x"].is_f64() && f["y"].is_f64() && f["size"].as_u64().expect("size") >= 20)
+    );
+    assert_eq!(v["complete"], false);
+    let costs: Vec<Vec<f64>> = serde_json::from_value(v["cost_matrix"].clone()).expect("matrix");
+    assert_eq!(costs.len(), 3);
+    let robots = v["robots"].as_array().expect("robots");
+    let mut total = 0.0;
+    for r in robots {
+        let target = &r["target"];
+        let path = r["path"].as_array().expect("path");
+        assert!(path.len() >= 2, "{r}");
+        let last = &path[path.len() - 1];
+        assert_eq!(
+            (last[0].as_f64(), last[1].as_f64()),
+            (target["x"].as_f64(), target["y"].as_f64())
+        );
+        total += r["cost"].as_f64().expect("cost");
+    }
+    // The assignment is optimal for the cost matrix it printed.
+    assert!(
+        (total - brute_force(&costs)).abs() < 1e-6,
+        "{total} vs {}",
+        brute_force(&costs)
+    );
+    assert!((v["total_cost"].as_f64().expect("total") - total).abs() < 1e-9);
+    let img = image::open(&png).expect("a PNG");
+    assert!(img.width() >= 1000 && img.height() >= 1000);
+    std::fs::remove_dir_all(&dir).expect("clean up");
+}
+
+#[test]
+fn greedy_is_never_better_and_an_invalid_robot_hovers() {
+    let args = |strategy: &str| {
+        let out = gcs(&[
+            "plan",
+            "--map",
+            &map("building_31.yaml"),
+            "--robot",
+            "0,0",
+            "--robot",
+            "5,2",
+            "--robot",
+            "none",
+            "--explored-radius",
+            "10",
+            "--strategy",
+            strategy,
+            "--json",
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        serde_json::from_slice::<Value>(&out.stdout).expect("json")
+    };
+    let h = args("hungarian");
+    let g = args("greedy");
+    assert!(h["total_cost"].as_f64() <= g["total_cost"].as_f64());
+    assert_eq!(h["robots"][2]["target"], Value::Null);
+    assert_eq!(h["robots"][2]["hover_reason"], "pose invalid");
+}
+
+#[test]
+fn text_output_names_every_robot() {
+    let out = gcs(&[
+        "plan",
+        "--map",
+        &map("building_31.yaml"),
+        "--robot",
+        "0,0",
+        "--explored-radius",
+        "6",
+    ]);
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("robot 0 → frontier"), "{text}");
+    assert!(text.contains("total path length"));
+}
+
+#[test]
+fn bad_input_gets_clear_errors() {
+    let out = gcs(&["plan", "--map", "/nonexistent/map.yaml", "--robot", "0,0"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent/map.yaml"));
+    let out = gcs(&[
+        "plan",
+        "--map",
+        &map("willow-full.yaml"),
+        "--robot",
+        "500,0",
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("outside the map"));
+    let out = gcs(&["plan", "--map", &map("willow-full.yaml"), "--robot", "1;2"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("expected X,Y"));
+    let out = gcs(&["plan", "--map", &map("willow-full.yaml")]);
+    assert_eq!(out.status.code(), Some(2), "--robot is required");
+}
