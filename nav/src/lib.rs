@@ -3,9 +3,11 @@
 //! planner step that ties them together (thesis §4.4, Algorithms 1–7).
 
 pub mod assignment;
+pub mod control;
 pub mod frontier;
 pub mod grid;
 pub mod inflate;
+pub mod local;
 pub mod mission;
 pub mod render;
 pub mod search;

@@ -1,0 +1,335 @@
+//! Controllers: PID with output limits and anti-windup, and the position controller that turns a
+//! pose error into stick commands (seed 002 ch. 5; thesis §4.3 height PI, yaw P, pitch/roll PD).
+//! Gains are configuration; the defaults are the published ones.
+
+use crate::local::wrap_angle;
+
+/// Gains and limits of one PID loop.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PidGains {
+    /// Proportional gain.
+    pub kp: f64,
+    /// Integral gain.
+    pub ki: f64,
+    /// Derivative gain.
+    pub kd: f64,
+    /// The output is clamped to ±this.
+    pub output_limit: f64,
+    /// The integral term's contribution is clamped to ±this.
+    pub integral_limit: f64,
+}
+
+impl PidGains {
+    /// P only.
+    pub const fn p(kp: f64) -> Self {
+        Self {
+            kp,
+            ki: 0.0,
+            kd: 0.0,
+            output_limit: 1.0,
+            integral_limit: 1.0,
+        }
+    }
+
+    /// Full PID with output and integral limits of 1.
+    pub const fn pid(kp: f64, ki: f64, kd: f64) -> Self {
+        Self {
+            kp,
+            ki,
+            kd,
+            output_limit: 1.0,
+            integral_limit: 1.0,
+        }
+    }
+}
+
+/// A PID loop. Anti-windup by conditional integration: while the output is saturated the
+/// integral only moves in the direction that brings it back.
+#[derive(Debug, Clone)]
+pub struct Pid {
+    gains: PidGains,
+    integral: f64,
+    previous: Option<f64>,
+}
+
+impl Pid {
+    /// A loop at rest.
+    pub fn new(gains: PidGains) -> Self {
+        Self {
+            gains,
+            integral: 0.0,
+            previous: None,
+        }
+    }
+
+    /// Forgets the integral and the last error (after a pause or a mode change).
+    pub fn reset(&mut self) {
+        self.integral = 0.0;
+        self.previous = None;
+    }
+
+    /// The integral term's current contribution (for displays and tests).
+    pub fn integral_term(&self) -> f64 {
+        self.gains.ki * self.integral
+    }
+
+    /// One update with `error` = setpoint − measurement after `dt` seconds. A non-finite error or
+    /// a non-positive `dt` gives 0 and leaves the state alone.
+    pub fn update(&mut self, error: f64, dt: f64) -> f64 {
+        if !(error.is_finite() && dt.is_finite() && dt > 0.0) {
+            return 0.0;
+        }
+        let g = self.gains;
+        let derivative = self.previous.map_or(0.0, |p| (error - p) / dt);
+        self.previous = Some(error);
+        let mut integral = self.integral + error * dt;
+        if g.ki != 0.0 {
+            let cap = g.integral_limit / g.ki.abs();
+            integral = integral.clamp(-cap, cap);
+        }
+        let unclamped = g.kp * error + g.ki * integral + g.kd * derivative;
+        let output = unclamped.clamp(-g.output_limit, g.output_limit);
+        let saturated = output != unclamped;
+        // Keep the new integral unless saturated and integrating further into the saturation.
+        if !saturated || (error * unclamped) < 0.0 {
+            self.integral = integral;
+        }
+        output
+    }
+}
+
+/// Stick command in [-1, 1] per axis, RC semantics: +roll right, +pitch forward, +yaw clockwise,
+/// +throttle climb (0 = hold altitude).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct StickCommand {
+    /// +1 = bank right.
+    pub roll: f64,
+    /// +1 = nose down (forward).
+    pub pitch: f64,
+    /// +1 = yaw clockwise.
+    pub yaw: f64,
+    /// +1 = climb.
+    pub throttle: f64,
+}
+
+/// A stick value as a pulse of 1500 ± 400 µs (seed 002 ch. 5).
+pub fn stick_to_us(u: f64) -> u16 {
+    let u = if u.is_finite() {
+        u.clamp(-1.0, 1.0)
+    } else {
+        0.0
+    };
+    (1500.0 + 400.0 * u).round() as u16
+}
+
+/// Gains of the position controller.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PositionGains {
+    /// Forward (body x) loop.
+    pub x: PidGains,
+    /// Left (body y) loop.
+    pub y: PidGains,
+    /// Height loop.
+    pub z: PidGains,
+    /// Heading loop.
+    pub yaw: PidGains,
+}
+
+impl Default for PositionGains {
+    /// Seed 002, Table 5.1.
+    fn default() -> Self {
+        Self {
+            x: PidGains::pid(0.1, 0.4, 4.0),
+            y: PidGains::pid(0.1, 0.15, 4.0),
+            z: PidGains::pid(0.4, 1.0, 0.7),
+            yaw: PidGains::p(2.5),
+        }
+    }
+}
+
+impl PositionGains {
+    /// The thesis's controllers, converted from its reversed-wiring µs gains to stick units
+    /// (500 µs = full stick): height PI (500, 15), yaw P (5 µs/° ≈ 0.57/rad), pitch and roll PD
+    /// limited to ±20 µs (±0.04 stick).
+    pub fn thesis() -> Self {
+        let pd = PidGains {
+            kp: 0.1,
+            ki: 0.0,
+            kd: 0.5,
+            output_limit: 0.04,
+            integral_limit: 0.0,
+        };
+        Self {
+            x: pd,
+            y: pd,
+            z: PidGains {
+                kp: 1.0,
+                ki: 0.03,
+                kd: 0.0,
+                output_limit: 1.0,
+                integral_limit: 0.5,
+            },
+            yaw: PidGains::p(5.0 / 500.0 * 180.0 / std::f64::consts::PI),
+        }
+    }
+}
+
+/// Setpoint or estimate: map-frame position and heading.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pose3 {
+    /// x, metres.
+    pub x: f64,
+    /// y, metres.
+    pub y: f64,
+    /// z (height), metres.
+    pub z: f64,
+    /// Heading, radians, counter-clockwise.
+    pub yaw: f64,
+}
+
+/// x/y/z/yaw PID controllers: a pose setpoint and a pose estimate in, sticks out.
+#[derive(Debug, Clone)]
+pub struct PositionController {
+    x: Pid,
+    y: Pid,
+    z: Pid,
+    yaw: Pid,
+}
+
+impl PositionController {
+    /// Controllers at rest.
+    pub fn new(gains: PositionGains) -> Self {
+        Self {
+            x: Pid::new(gains.x),
+            y: Pid::new(gains.y),
+            z: Pid::new(gains.z),
+            yaw: Pid::new(gains.yaw),
+        }
+    }
+
+    /// Resets every loop.
+    pub fn reset(&mut self) {
+        for p in [&mut self.x, &mut self.y, &mut self.z, &mut self.yaw] {
+            p.reset();
+        }
+    }
+
+    /// One update. Position errors are rotated into the body frame by the current heading; the
+    /// heading error is wrapped, so −179.9° to 179.9° is a 0.2° turn.
+    pub fn update(&mut self, setpoint: &Pose3, estimate: &Pose3, dt: f64) -> StickCommand {
+        let (ex, ey) = (setpoint.x - estimate.x, setpoint.y - estimate.y);
+        let (s, c) = estimate.yaw.sin_cos();
+        let forward = c * ex + s * ey;
+        let left = -s * ex + c * ey;
+        StickCommand {
+            pitch: self.x.update(forward, dt),
+            roll: -self.y.update(left, dt),
+            throttle: self.z.update(setpoint.z - estimate.z, dt),
+            // Map yaw is counter-clockwise; a clockwise stick is positive.
+            yaw: -self.yaw.update(wrap_angle(setpoint.yaw - estimate.yaw), dt),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A climb-rate plant like ALT_HOLD: the stick commands a climb rate of up to 1 m/s, reached
+    /// with a first-order lag of 0.3 s.
+    fn simulate(pid: &mut Pid, target: f64, seconds: f64, ceiling: f64) -> (Vec<f64>, f64) {
+        let dt = 0.05;
+        let (mut z, mut v) = (0.0f64, 0.0f64);
+        let mut trace = vec![];
+        for _ in 0..(seconds / dt) as usize {
+            let u = pid.update(target - z, dt);
+            v += ((u * 1.0) - v) / 0.3 * dt;
+            z = (z + v * dt).min(ceiling);
+            if z >= ceiling {
+                v = v.min(0.0);
+            }
+            trace.push(z);
+        }
+        (trace, z)
+    }
+
+    #[test]
+    fn height_loop_settles_on_a_first_order_plant() {
+        let mut pid = Pid::new(PidGains::pid(1.2, 0.3, 0.1));
+        let (trace, z) = simulate(&mut pid, 1.0, 15.0, f64::INFINITY);
+        assert!((z - 1.0).abs() < 0.02, "settled at {z}");
+        let peak = trace.iter().copied().fold(0.0, f64::max);
+        assert!(peak < 1.2, "overshoot to {peak}");
+    }
+
+    #[test]
+    fn no_windup_while_saturated() {
+        // No integral limit to help: only conditional integration stands between the loop and
+        // windup. A ceiling holds the drone at 0.5 m while it is asked for 3 m for 20 s; a plain
+        // PID would integrate 2.5 m × 20 s × 0.5 = 25 (twenty-five full sticks) meanwhile.
+        let gains = PidGains { kp: 1.2, ki: 0.5, kd: 0.0, output_limit: 1.0, integral_limit: 1e9 };
+        let mut pid = Pid::new(gains);
+        simulate(&mut pid, 3.0, 20.0, 0.5);
+        assert!(pid.integral_term().abs() < 0.5, "wound up to {}", pid.integral_term());
+        // Asked for 0.4 m now, it is there within 3 s instead of flying up on a wound integral.
+        let (trace, _) = simulate(&mut pid, 0.4, 6.0, f64::INFINITY);
+        let after_3s = &trace[60..];
+        assert!(after_3s.iter().all(|z| (z - 0.4).abs() < 0.1), "{:?}", &after_3s[..5]);
+    }
+
+    #[test]
+    fn outputs_are_limited_and_mapped_to_pulses() {
+        let mut pid = Pid::new(PidGains::pid(10.0, 0.0, 0.0));
+        assert_eq!(pid.update(5.0, 0.1), 1.0);
+        assert_eq!(pid.update(f64::NAN, 0.1), 0.0);
+        assert_eq!(pid.update(1.0, 0.0), 0.0);
+        assert_eq!(
+            (
+                stick_to_us(1.0),
+                stick_to_us(-1.0),
+                stick_to_us(0.0),
+                stick_to_us(f64::NAN)
+            ),
+            (1900, 1100, 1500, 1500)
+        );
+    }
+
+    #[test]
+    fn position_errors_are_rotated_into_the_body_frame() {
+        let mut pc = PositionController::new(PositionGains::default());
+        // Facing +y (yaw 90°), the target 1 m along +y is straight ahead: pitch forward, no roll.
+        let sp = Pose3 {
+            x: 0.0,
+            y: 1.0,
+            z: 1.0,
+            yaw: std::f64::consts::FRAC_PI_2,
+        };
+        let est = Pose3 {
+            x: 0.0,
+            y: 0.0,
+            z: 1.0,
+            yaw: std::f64::consts::FRAC_PI_2,
+        };
+        let s = pc.update(&sp, &est, 0.1);
+        assert!(
+            s.pitch > 0.0 && s.roll.abs() < 1e-9 && s.throttle.abs() < 1e-9 && s.yaw.abs() < 1e-9,
+            "{s:?}"
+        );
+        // A target to the left (+x while facing +y is to the right): roll right.
+        let mut pc = PositionController::new(PositionGains::default());
+        let s = pc.update(&Pose3 { x: 1.0, ..est }, &est, 0.1);
+        assert!(s.roll > 0.0 && s.pitch.abs() < 1e-9, "{s:?}");
+        // Heading across the ±180° jump turns the short way: 179.9° → −179.9° is 0.2° counter-clockwise.
+        let mut pc = PositionController::new(PositionGains::default());
+        let a = Pose3 {
+            yaw: 179.9f64.to_radians(),
+            ..est
+        };
+        let b = Pose3 {
+            yaw: (-179.9f64).to_radians(),
+            ..est
+        };
+        let s = pc.update(&b, &a, 0.1);
+        assert!(s.yaw < 0.0 && s.yaw > -0.02, "{s:?}");
+    }
+}
