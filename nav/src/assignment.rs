@@ -1,9 +1,9 @@
-//! Assigning robots to frontiers: the Hungarian algorithm (exact, O(n²·m)) and the greedy
-//! nearest-pair baseline.
+//! Assigning robots to frontiers: the Hungarian algorithm (exact, O(n²·m), in its shortest
+//! augmenting path form) and the greedy nearest-pair baseline.
 
 /// Minimum-cost assignment of rows (robots) to columns (frontiers): each row gets at most one
 /// column, each column at most one row, as many pairs as the smaller side, least total cost.
-/// Entries must be finite. Returns, per row, its column.
+/// Entries should be finite (a row of infinities gets nothing). Returns, per row, its column.
 pub fn hungarian(cost: &[Vec<f64>]) -> Vec<Option<usize>> {
     let rows = cost.len();
     let cols = cost.first().map_or(0, Vec::len);
@@ -24,64 +24,92 @@ pub fn hungarian(cost: &[Vec<f64>]) -> Vec<Option<usize>> {
         }
         return out;
     }
-    // Shortest augmenting paths with potentials (rows ≤ cols), 1-based with a virtual column 0.
-    let (n, m) = (rows, cols);
-    let mut u = vec![0.0f64; n + 1];
-    let mut v = vec![0.0f64; m + 1];
-    let mut owner = vec![0usize; m + 1]; // column → row (1-based), 0 = free
-    let mut way = vec![0usize; m + 1];
-    for i in 1..=n {
-        owner[0] = i;
-        let mut j0 = 0;
-        let mut minv = vec![f64::INFINITY; m + 1];
-        let mut used = vec![false; m + 1];
-        loop {
-            used[j0] = true;
-            let i0 = owner[j0];
-            let mut delta = f64::INFINITY;
-            let mut j1 = 0;
-            for j in 1..=m {
-                if !used[j] {
-                    let cur = cost[i0 - 1][j - 1] - u[i0] - v[j];
-                    if cur < minv[j] {
-                        minv[j] = cur;
-                        way[j] = j0;
-                    }
-                    if minv[j] < delta {
-                        delta = minv[j];
-                        j1 = j;
-                    }
+    let flat: Vec<f64> = cost.iter().flat_map(|r| r.iter().copied()).collect();
+    solve(rows, cols, &flat)
+}
+
+/// Shortest augmenting paths with dual potentials (Crouse 2016, the method SciPy's
+/// `linear_sum_assignment` uses) on a flat row-major matrix with `rows ≤ cols`. Each row's search
+/// only visits the columns not yet in its tree, so the inner loops shrink as it goes.
+fn solve(rows: usize, cols: usize, cost: &[f64]) -> Vec<Option<usize>> {
+    const NONE: usize = usize::MAX;
+    let mut u = vec![0.0f64; rows];
+    let mut v = vec![0.0f64; cols];
+    let mut shortest = vec![f64::INFINITY; cols];
+    let mut path = vec![NONE; cols];
+    let mut col4row = vec![NONE; rows];
+    let mut row4col = vec![NONE; cols];
+    let mut in_rows = vec![false; rows];
+    let mut in_cols = vec![false; cols];
+    let mut remaining: Vec<usize> = Vec::with_capacity(cols);
+    for cur_row in 0..rows {
+        // Dijkstra-like search for the cheapest augmenting path from `cur_row`.
+        remaining.clear();
+        remaining.extend((0..cols).rev());
+        in_rows.fill(false);
+        in_cols.fill(false);
+        shortest.fill(f64::INFINITY);
+        let mut min_val = 0.0;
+        let mut i = cur_row;
+        let sink = loop {
+            in_rows[i] = true;
+            let row = &cost[i * cols..(i + 1) * cols];
+            let ui = u[i];
+            let mut lowest = f64::INFINITY;
+            let mut index = NONE;
+            for (it, &j) in remaining.iter().enumerate() {
+                let r = min_val + row[j] - ui - v[j];
+                if r < shortest[j] {
+                    path[j] = i;
+                    shortest[j] = r;
+                }
+                if shortest[j] < lowest || (shortest[j] == lowest && row4col[j] == NONE) {
+                    lowest = shortest[j];
+                    index = it;
                 }
             }
-            for j in 0..=m {
-                if used[j] {
-                    u[owner[j]] += delta;
-                    v[j] -= delta;
-                } else {
-                    minv[j] -= delta;
-                }
+            if index == NONE {
+                // Only with non-finite costs: no augmenting path exists.
+                return col4row
+                    .into_iter()
+                    .map(|c| (c != NONE).then_some(c))
+                    .collect();
             }
-            j0 = j1;
-            if owner[j0] == 0 {
-                break;
+            min_val = lowest;
+            let j = remaining.swap_remove(index);
+            in_cols[j] = true;
+            if row4col[j] == NONE {
+                break j;
+            }
+            i = row4col[j];
+        };
+        // Update the potentials.
+        u[cur_row] += min_val;
+        for r in 0..rows {
+            if in_rows[r] && r != cur_row {
+                u[r] += min_val - shortest[col4row[r]];
             }
         }
+        for c in 0..cols {
+            if in_cols[c] {
+                v[c] -= min_val - shortest[c];
+            }
+        }
+        // Augment along the path.
+        let mut j = sink;
         loop {
-            let j1 = way[j0];
-            owner[j0] = owner[j1];
-            j0 = j1;
-            if j0 == 0 {
+            let r = path[j];
+            row4col[j] = r;
+            std::mem::swap(&mut col4row[r], &mut j);
+            if r == cur_row {
                 break;
             }
         }
     }
-    let mut out = vec![None; n];
-    for j in 1..=m {
-        if owner[j] != 0 {
-            out[owner[j] - 1] = Some(j - 1);
-        }
-    }
-    out
+    col4row
+        .into_iter()
+        .map(|c| (c != NONE).then_some(c))
+        .collect()
 }
 
 /// The greedy baseline: repeatedly give the cheapest remaining (robot, frontier) pair.

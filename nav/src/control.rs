@@ -267,14 +267,28 @@ mod tests {
         // No integral limit to help: only conditional integration stands between the loop and
         // windup. A ceiling holds the drone at 0.5 m while it is asked for 3 m for 20 s; a plain
         // PID would integrate 2.5 m × 20 s × 0.5 = 25 (twenty-five full sticks) meanwhile.
-        let gains = PidGains { kp: 1.2, ki: 0.5, kd: 0.0, output_limit: 1.0, integral_limit: 1e9 };
+        let gains = PidGains {
+            kp: 1.2,
+            ki: 0.5,
+            kd: 0.0,
+            output_limit: 1.0,
+            integral_limit: 1e9,
+        };
         let mut pid = Pid::new(gains);
         simulate(&mut pid, 3.0, 20.0, 0.5);
-        assert!(pid.integral_term().abs() < 0.5, "wound up to {}", pid.integral_term());
+        assert!(
+            pid.integral_term().abs() < 0.5,
+            "wound up to {}",
+            pid.integral_term()
+        );
         // Asked for 0.4 m now, it is there within 3 s instead of flying up on a wound integral.
         let (trace, _) = simulate(&mut pid, 0.4, 6.0, f64::INFINITY);
         let after_3s = &trace[60..];
-        assert!(after_3s.iter().all(|z| (z - 0.4).abs() < 0.1), "{:?}", &after_3s[..5]);
+        assert!(
+            after_3s.iter().all(|z| (z - 0.4).abs() < 0.1),
+            "{:?}",
+            &after_3s[..5]
+        );
     }
 
     #[test]
