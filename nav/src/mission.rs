@@ -308,14 +308,19 @@ mod tests {
             0.25,
         )
     }
-    #[test]
-    fn each_robot_goes_to_its_near_frontier() {
-        let g = toy();
-        let cfg = PlannerConfig {
+
+    fn toy_config() -> PlannerConfig {
+        PlannerConfig {
             robot_radius_m: 0.2,
             min_frontier_cells: 2,
             ..Default::default()
-        };
+        }
+    }
+
+    #[test]
+    fn each_robot_goes_to_its_near_frontier() {
+        let g = toy();
+        let cfg = toy_config();
         // Robot 0 in the left room, robot 1 in the right room.
         let p = plan(&g, &[Some([1.0, 1.0]), Some([6.0, 1.0])], &cfg).unwrap();
         assert_eq!(p.frontiers.len(), 2);
@@ -363,11 +368,7 @@ mod tests {
     #[test]
     fn invalid_pose_hovers_and_costs_largest_plus_ten() {
         let g = toy();
-        let cfg = PlannerConfig {
-            robot_radius_m: 0.2,
-            min_frontier_cells: 2,
-            ..Default::default()
-        };
+        let cfg = toy_config();
         let p = plan(&g, &[None, Some([6.0, 1.0])], &cfg).unwrap();
         assert_eq!(p.robots[0].hover_reason, Some("pose invalid"));
         let largest = p.costs[1].iter().copied().fold(0.0, f64::max);
@@ -382,11 +383,7 @@ mod tests {
     #[test]
     fn more_robots_than_frontiers_some_hover() {
         let g = toy();
-        let cfg = PlannerConfig {
-            robot_radius_m: 0.2,
-            min_frontier_cells: 2,
-            ..Default::default()
-        };
+        let cfg = toy_config();
         let p = plan(
             &g,
             &[Some([1.0, 1.0]), Some([2.0, 1.0]), Some([6.0, 1.0])],
