@@ -2,6 +2,7 @@
 
 mod plan;
 mod probe;
+mod slam_cmd;
 
 use std::process::ExitCode;
 
@@ -19,6 +20,11 @@ struct Cli {
 enum Top {
     /// One mission-planner step on a map: frontiers, assignment, paths.
     Plan(plan::PlanArgs),
+    /// SLAM tools: trajectory evaluation.
+    Slam {
+        #[command(subcommand)]
+        command: slam_cmd::SlamCommand,
+    },
     /// Talk to one vehicle link.
     Link {
         #[command(subcommand)]
@@ -43,6 +49,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Top::Plan(args) => plan::run(&args),
+        Top::Slam { command } => slam_cmd::run(&command),
         Top::Link {
             command: LinkCommand::Probe(args),
         } => probe::run(&args),

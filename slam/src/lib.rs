@@ -1,1 +1,4 @@
-//! Multi-robot RGB-D SLAM: front end, pose graph, loop closure, occupancy, EKF. Not built yet: see issues #5 and #6.
+//! Multi-robot RGB-D SLAM. So far: trajectories (TUM format) and their evaluation (ATE, RPE).
+
+pub mod eval;
+pub mod trajectory;
