@@ -1,4 +1,7 @@
-//! Multi-robot RGB-D SLAM. So far: trajectories (TUM format) and their evaluation (ATE, RPE).
+//! Multi-robot RGB-D SLAM. So far: pose graphs (g2o) and their optimisation, trajectories (TUM
+//! format) and their evaluation (ATE, RPE).
 
 pub mod eval;
+pub mod optimize;
+pub mod posegraph;
 pub mod trajectory;

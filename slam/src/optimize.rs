@@ -1,0 +1,518 @@
+//! Levenberg–Marquardt (and Gauss–Newton) on pose graphs, with faer's sparse Cholesky. The
+//! sparsity pattern of the normal equations is fixed by the graph's edges, so it is analysed once
+//! (symbolic factorisation) and only refilled with numbers each iteration.
+
+use std::time::Instant;
+
+use faer::Side;
+use faer::linalg::solvers::Solve;
+use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
+use faer::sparse::{Pair, SparseColMat, SymbolicSparseColMat};
+
+use crate::posegraph::{Graph, Pose, chi2};
+
+/// Optimiser settings.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// Gauss–Newton (no damping) instead of Levenberg–Marquardt.
+    pub gauss_newton: bool,
+    /// At most this many iterations.
+    pub max_iterations: usize,
+    /// Stop when an iteration lowers the cost by less than this fraction.
+    pub relative_tolerance: f64,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Self {
+            gauss_newton: false,
+            max_iterations: 100,
+            relative_tolerance: 1e-9,
+        }
+    }
+}
+
+/// What an optimisation did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Report {
+    /// chi² before.
+    pub initial_cost: f64,
+    /// chi² after.
+    pub final_cost: f64,
+    /// Iterations accepted.
+    pub iterations: usize,
+    /// Wall time, seconds.
+    pub time_s: f64,
+}
+
+/// Why an optimisation could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum OptimizeError {
+    /// The linear algebra failed (a disconnected graph, or memory).
+    #[error("the normal equations could not be factorised: {0} (is the graph connected?)")]
+    Factorization(String),
+}
+
+/// The fixed structure of one graph's normal equations.
+struct Pattern {
+    n: usize,
+    symbolic: SymbolicSparseColMat<usize>,
+    argsort: faer::sparse::Argsort<usize>,
+    llt: SymbolicLlt<usize>,
+}
+
+/// Vertex 0 is the anchor (fixed); vertex k ≥ 1 is variable k − 1.
+fn var(k: usize) -> Option<usize> {
+    k.checked_sub(1)
+}
+
+/// Lower-triangle entries, in the order `fill` writes values: the diagonal blocks, then one block
+/// per edge between two variables.
+fn entries<P: Pose>(g: &Graph<P>) -> Vec<Pair<usize, usize>> {
+    let d = P::DOF;
+    let mut out = Vec::new();
+    for v in 0..g.poses.len().saturating_sub(1) {
+        for r in 0..d {
+            for c in 0..=r {
+                out.push(Pair::new(v * d + r, v * d + c));
+            }
+        }
+    }
+    for e in &g.edges {
+        if let (Some(a), Some(b)) = (var(e.i), var(e.j)) {
+            let (hi, lo) = if a > b { (a, b) } else { (b, a) };
+            for r in 0..d {
+                for c in 0..d {
+                    out.push(Pair::new(hi * d + r, lo * d + c));
+                }
+            }
+        }
+    }
+    out
+}
+
+impl Pattern {
+    fn new<P: Pose>(g: &Graph<P>) -> Result<Self, OptimizeError> {
+        let n = g.poses.len().saturating_sub(1) * P::DOF;
+        let (symbolic, argsort) = SymbolicSparseColMat::try_new_from_indices(n, n, &entries(g))
+            .map_err(|e| OptimizeError::Factorization(format!("{e:?}")))?;
+        let llt = SymbolicLlt::try_new(symbolic.as_ref(), Side::Lower)
+            .map_err(|e| OptimizeError::Factorization(format!("{e:?}")))?;
+        Ok(Self {
+            n,
+            symbolic,
+            argsort,
+            llt,
+        })
+    }
+}
+
+/// The linearised system at the current estimate: H blocks (in `entries` order) and the gradient.
+struct Linear {
+    diag: Vec<f64>,
+    off: Vec<f64>,
+    b: Vec<f64>,
+}
+
+fn linearize<P: Pose>(g: &Graph<P>) -> Linear {
+    let d = P::DOF;
+    let nv = g.poses.len().saturating_sub(1);
+    let mut diag = vec![0.0; nv * d * d];
+    let mut off = Vec::new();
+    let mut b = vec![0.0; nv * d];
+    let (mut e0, mut ep, mut em) = (vec![0.0; d], vec![0.0; d], vec![0.0; d]);
+    let mut jac = vec![0.0; d * 2 * d]; // d rows × 2d columns (row-major)
+    let h = 1e-6;
+    let mut delta = vec![0.0; d];
+    for edge in &g.edges {
+        let (xi, xj) = (&g.poses[edge.i], &g.poses[edge.j]);
+        P::error(xi, xj, &edge.z, &mut e0);
+        // Central differences of the error with respect to both poses' perturbations.
+        for k in 0..2 * d {
+            delta.iter_mut().for_each(|x| *x = 0.0);
+            delta[k % d] = h;
+            let (pi, pj) = if k < d {
+                (xi.retract(&delta), xj.clone())
+            } else {
+                (xi.clone(), xj.retract(&delta))
+            };
+            P::error(&pi, &pj, &edge.z, &mut ep);
+            delta[k % d] = -h;
+            let (mi, mj) = if k < d {
+                (xi.retract(&delta), xj.clone())
+            } else {
+                (xi.clone(), xj.retract(&delta))
+            };
+            P::error(&mi, &mj, &edge.z, &mut em);
+            for r in 0..d {
+                let mut diff = ep[r] - em[r];
+                if d == 3 && r == 2 {
+                    diff = wrap(diff); // SE(2) angle errors wrap
+                }
+                jac[r * 2 * d + k] = diff / (2.0 * h);
+            }
+        }
+        // JᵀΩ (2d × d), then JᵀΩJ and JᵀΩe.
+        let mut jt_omega = vec![0.0; 2 * d * d];
+        for a in 0..2 * d {
+            for c in 0..d {
+                let mut s = 0.0;
+                for r in 0..d {
+                    s += jac[r * 2 * d + a] * edge.info[r * d + c];
+                }
+                jt_omega[a * d + c] = s;
+            }
+        }
+        let block = |a: usize, bcol: usize| -> f64 {
+            let mut s = 0.0;
+            for r in 0..d {
+                s += jt_omega[a * d + r] * jac[r * 2 * d + bcol];
+            }
+            s
+        };
+        let vars = [var(edge.i), var(edge.j)];
+        for (side, v) in vars.iter().enumerate() {
+            let Some(v) = v else { continue };
+            for r in 0..d {
+                let mut g_r = 0.0;
+                for c in 0..d {
+                    g_r += jt_omega[(side * d + r) * d + c] * e0[c];
+                }
+                b[v * d + r] += g_r;
+                for c in 0..d {
+                    diag[v * d * d + r * d + c] += block(side * d + r, side * d + c);
+                }
+            }
+        }
+        if let [Some(a), Some(bv)] = vars {
+            // The block at (max, min) of the two variables.
+            let (hi_side, lo_side) = if a > bv { (0, 1) } else { (1, 0) };
+            for r in 0..d {
+                for c in 0..d {
+                    off.push(block(hi_side * d + r, lo_side * d + c));
+                }
+            }
+        }
+    }
+    Linear { diag, off, b }
+}
+
+fn wrap(a: f64) -> f64 {
+    let t = std::f64::consts::TAU;
+    let mut a = a.rem_euclid(t);
+    if a > std::f64::consts::PI {
+        a -= t;
+    }
+    a
+}
+
+/// Solves (H + λ·diag(H)) δ = −b on the fixed pattern.
+fn solve(p: &Pattern, lin: &Linear, d: usize, lambda: f64) -> Result<Vec<f64>, OptimizeError> {
+    let nv = p.n / d.max(1);
+    let mut values = Vec::with_capacity(nv * d * (d + 1) / 2 + lin.off.len());
+    for v in 0..nv {
+        for r in 0..d {
+            for c in 0..=r {
+                let mut x = lin.diag[v * d * d + r * d + c];
+                if r == c {
+                    x += lambda * x.max(1e-9);
+                }
+                values.push(x);
+            }
+        }
+    }
+    values.extend_from_slice(&lin.off);
+    let mat = SparseColMat::new_from_argsort(p.symbolic.clone(), &p.argsort, &values)
+        .map_err(|e| OptimizeError::Factorization(format!("{e:?}")))?;
+    let llt = Llt::try_new_with_symbolic(p.llt.clone(), mat.as_ref(), Side::Lower)
+        .map_err(|e| OptimizeError::Factorization(format!("{e:?}")))?;
+    let mut rhs = faer::Mat::<f64>::from_fn(p.n, 1, |r, _| -lin.b[r]);
+    llt.solve_in_place(rhs.as_mut());
+    Ok((0..p.n).map(|r| rhs[(r, 0)]).collect())
+}
+
+fn apply<P: Pose>(poses: &[P], delta: &[f64]) -> Vec<P> {
+    let d = P::DOF;
+    poses
+        .iter()
+        .enumerate()
+        .map(|(k, x)| match var(k) {
+            Some(v) => x.retract(&delta[v * d..(v + 1) * d]),
+            None => x.clone(),
+        })
+        .collect()
+}
+
+/// Optimises the graph in place (vertex 0 fixed).
+pub fn optimize<P: Pose>(g: &mut Graph<P>, options: &Options) -> Result<Report, OptimizeError> {
+    let start = Instant::now();
+    let initial_cost = chi2(g);
+    if g.poses.len() < 2 || g.edges.is_empty() {
+        return Ok(Report {
+            initial_cost,
+            final_cost: initial_cost,
+            iterations: 0,
+            time_s: 0.0,
+        });
+    }
+    let pattern = Pattern::new(g)?;
+    let d = P::DOF;
+    let mut cost = initial_cost;
+    let mut lambda = if options.gauss_newton { 0.0 } else { 1e-5 };
+    let mut iterations = 0;
+    'outer: while iterations < options.max_iterations {
+        let lin = linearize(g);
+        loop {
+            let step = match solve(&pattern, &lin, d, lambda) {
+                Ok(s) if s.iter().all(|x| x.is_finite()) => s,
+                Ok(_) | Err(_) if !options.gauss_newton && lambda < 1e8 => {
+                    lambda = (lambda * 10.0).max(1e-6);
+                    continue;
+                }
+                Ok(_) => {
+                    return Err(OptimizeError::Factorization(
+                        "the step is not finite".into(),
+                    ));
+                }
+                Err(e) => return Err(e),
+            };
+            let trial = Graph {
+                ids: vec![],
+                poses: apply(&g.poses, &step),
+                edges: vec![],
+            };
+            let new_cost = chi2(&Graph {
+                ids: vec![],
+                poses: trial.poses.clone(),
+                edges: g.edges.clone(),
+            });
+            if new_cost < cost || options.gauss_newton {
+                g.poses = trial.poses;
+                let improvement = (cost - new_cost) / cost.max(f64::MIN_POSITIVE);
+                cost = new_cost;
+                iterations += 1;
+                lambda = (lambda / 3.0).max(if options.gauss_newton { 0.0 } else { 1e-9 });
+                if improvement.abs() < options.relative_tolerance {
+                    break 'outer;
+                }
+                break;
+            }
+            lambda *= 4.0;
+            if lambda > 1e8 {
+                break 'outer; // no step lowers the cost: a minimum
+            }
+        }
+    }
+    Ok(Report {
+        initial_cost,
+        final_cost: cost,
+        iterations,
+        time_s: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// Solves the linear least-squares problem `min ‖A x − b‖²` given as rows of
+/// `(&[(column, coefficient)], rhs)`, through its normal equations and a sparse Cholesky.
+fn least_squares(n: usize, rows: &[(Vec<(usize, f64)>, f64)]) -> Result<Vec<f64>, OptimizeError> {
+    let fail = |e: String| OptimizeError::Factorization(e);
+    let mut triplets = Vec::new();
+    let mut atb = vec![0.0; n];
+    for (coefs, rhs) in rows {
+        for &(a, ca) in coefs {
+            atb[a] += ca * rhs;
+            for &(b, cb) in coefs {
+                if a >= b {
+                    triplets.push(faer::sparse::Triplet::new(a, b, ca * cb));
+                }
+            }
+        }
+    }
+    let ata = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &triplets)
+        .map_err(|e| fail(format!("{e:?}")))?;
+    let symbolic =
+        SymbolicLlt::try_new(ata.symbolic(), Side::Lower).map_err(|e| fail(format!("{e:?}")))?;
+    let llt = Llt::try_new_with_symbolic(symbolic, ata.as_ref(), Side::Lower)
+        .map_err(|e| fail(format!("{e:?}")))?;
+    let mut rhs = faer::Mat::<f64>::from_fn(n, 1, |r, _| atb[r]);
+    llt.solve_in_place(rhs.as_mut());
+    Ok((0..n).map(|r| rhs[(r, 0)]).collect())
+}
+
+/// Chordal initialisation (Carlone et al. 2015): relax `R_j = R_i R̃_ij` to a linear problem in the
+/// rotation matrices' entries, project each onto SO(3), then solve the translations with the
+/// rotations fixed. Vertex 0 keeps its pose. Far better than chained odometry on graphs like torus3D.
+pub fn chordal_init(g: &mut Graph<nalgebra::Isometry3<f64>>) -> Result<(), OptimizeError> {
+    use nalgebra::{Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
+    let n = g.poses.len();
+    if n < 2 {
+        return Ok(());
+    }
+    let r0 = *g.poses[0].rotation.to_rotation_matrix().matrix();
+    let t0 = g.poses[0].translation.vector;
+    // Rotations: unknown entries of R_v (v ≥ 1), row-major, 9 per vertex.
+    let rot = |v: usize, r: usize, c: usize| (v - 1) * 9 + r * 3 + c;
+    let mut rows = Vec::with_capacity(g.edges.len() * 9);
+    for e in &g.edges {
+        let rz = *e.z.rotation.to_rotation_matrix().matrix();
+        for r in 0..3 {
+            for c in 0..3 {
+                // R_j[r,c] − Σ_k R_i[r,k] R̃[k,c] = 0
+                let mut coefs = Vec::with_capacity(4);
+                let mut rhs = 0.0;
+                if e.j == 0 {
+                    rhs -= r0[(r, c)];
+                } else {
+                    coefs.push((rot(e.j, r, c), 1.0));
+                }
+                for k in 0..3 {
+                    if e.i == 0 {
+                        rhs += r0[(r, k)] * rz[(k, c)];
+                    } else {
+                        coefs.push((rot(e.i, r, k), -rz[(k, c)]));
+                    }
+                }
+                rows.push((coefs, rhs));
+            }
+        }
+    }
+    let x = least_squares((n - 1) * 9, &rows)?;
+    let mut rotations = vec![r0];
+    for v in 1..n {
+        let m = Matrix3::from_fn(|r, c| x[rot(v, r, c)]);
+        let svd = m.svd(true, true);
+        let (Some(u), Some(vt)) = (svd.u, svd.v_t) else {
+            return Err(OptimizeError::Factorization(
+                "a rotation could not be projected".into(),
+            ));
+        };
+        let mut s = Matrix3::identity();
+        if (u * vt).determinant() < 0.0 {
+            s[(2, 2)] = -1.0;
+        }
+        rotations.push(u * s * vt);
+    }
+    // Translations: t_j − t_i = R_i t̃_ij.
+    let tr = |v: usize, a: usize| (v - 1) * 3 + a;
+    let mut rows = Vec::with_capacity(g.edges.len() * 3);
+    for e in &g.edges {
+        let rhs_v: Vector3<f64> = rotations[e.i] * e.z.translation.vector;
+        for a in 0..3 {
+            let mut coefs = Vec::with_capacity(2);
+            let mut rhs = rhs_v[a];
+            if e.j == 0 {
+                rhs -= t0[a];
+            } else {
+                coefs.push((tr(e.j, a), 1.0));
+            }
+            if e.i == 0 {
+                rhs += t0[a];
+            } else {
+                coefs.push((tr(e.i, a), -1.0));
+            }
+            rows.push((coefs, rhs));
+        }
+    }
+    let t = least_squares((n - 1) * 3, &rows)?;
+    for v in 1..n {
+        let r =
+            UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(rotations[v]));
+        g.poses[v] = nalgebra::Isometry3::from_parts(
+            Translation3::new(t[tr(v, 0)], t[tr(v, 1)], t[tr(v, 2)]),
+            r,
+        );
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::posegraph::tests::data;
+    use crate::posegraph::{AnyGraph, read_g2o, se_sync_objective};
+
+    fn run(file: &str) -> (f64, Report) {
+        let mut g = read_g2o(data(file)).unwrap();
+        let report = match &mut g {
+            AnyGraph::Se2(g) => optimize(g, &Options::default()).unwrap(),
+            AnyGraph::Se3(g) => optimize(g, &Options::default()).unwrap(),
+        };
+        (se_sync_objective(&g), report)
+    }
+
+    #[test]
+    fn tiny_grid_returns_to_its_minimum_and_gn_agrees() {
+        let AnyGraph::Se3(mut g) = read_g2o(data("tinyGrid3D.g2o")).unwrap() else {
+            panic!("3D")
+        };
+        let mut gn = g.clone();
+        let r = optimize(&mut g, &Options::default()).unwrap();
+        assert!(r.final_cost < r.initial_cost / 10.0, "{r:?}");
+        let r_gn = optimize(
+            &mut gn,
+            &Options {
+                gauss_newton: true,
+                ..Options::default()
+            },
+        )
+        .unwrap();
+        assert!(
+            (r_gn.final_cost - r.final_cost).abs() < 1e-6 * r.final_cost,
+            "{r_gn:?} vs {r:?}"
+        );
+        // Knock every pose off the minimum: the optimiser brings it back.
+        for (k, p) in g.poses.iter_mut().enumerate().skip(1) {
+            let s = 0.05 * ((k * 7 % 5) as f64 - 2.0);
+            *p = p.retract(&[s, -s, s, 0.5 * s, -0.5 * s, 0.5 * s]);
+        }
+        assert!(chi2(&g) > r.final_cost * 1.5);
+        let again = optimize(&mut g, &Options::default()).unwrap();
+        assert!(
+            (again.final_cost - r.final_cost).abs() < 1e-6 * r.final_cost,
+            "{again:?} vs {r:?}"
+        );
+    }
+
+    #[test]
+    fn every_shared_graph_reaches_the_published_optimum() {
+        // (file, SE-Sync's F*, GTSAM's local optimum as chi² = 2 × its error, where published)
+        for (file, f_star, gtsam) in [
+            ("manhattan.g2o", 6.432e3, None),
+            ("parking-garage.g2o", 1.263e0, Some(2.0 * 0.6342)),
+            ("sphere2500.g2o", 1.687e3, Some(2.0 * 675.70)),
+        ] {
+            let (f, r) = run(file);
+            assert!(
+                f <= f_star * 1.05,
+                "{file}: F = {f} vs F* = {f_star}, {r:?}"
+            );
+            if let Some(c) = gtsam {
+                assert!(
+                    r.final_cost <= c * 1.001,
+                    "{file}: chi² {} vs GTSAM {c}",
+                    r.final_cost
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn torus_from_a_chordal_start_reaches_the_published_optimum() {
+        let AnyGraph::Se3(mut g) = read_g2o(data("torus3D.g2o")).unwrap() else {
+            panic!("3D")
+        };
+        chordal_init(&mut g).unwrap();
+        let r = optimize(&mut g, &Options::default()).unwrap();
+        let f = se_sync_objective(&AnyGraph::Se3(g));
+        // SE-Sync's F* = 2.423e4; GTSAM from a chordal start: error 12117.6 = chi² 24235.2.
+        assert!(f <= 2.423e4 * 1.05, "F = {f}, {r:?}");
+        assert!(r.final_cost <= 2.0 * 12117.6 * 1.001, "{r:?}");
+    }
+
+    #[test]
+    fn intel_reaches_the_published_optimum() {
+        let (f, r) = run("intel.g2o");
+        // SE-Sync's F* = 52.35; GTSAM's local optimum: error 22.502 = chi² 45.0.
+        assert!(f <= 52.35 * 1.05, "F = {f}, {r:?}");
+        assert!(r.final_cost <= 45.004 * 1.001, "{r:?}");
+    }
+}
