@@ -60,3 +60,102 @@ fn eval_errors_are_clear() {
         .contains("TUM1_camera.yaml:")
     );
 }
+
+fn graph(name: &str) -> String {
+    format!(
+        "{}/../../shared/data/posegraph/{name}",
+        env!("CARGO_MANIFEST_DIR")
+    )
+}
+
+#[test]
+fn optimize_writes_every_vertex_and_reports_costs() {
+    let dir = std::env::temp_dir().join(format!("slam-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let out_path = dir.join("out.g2o");
+    let out = Command::new(env!("CARGO_BIN_EXE_gcs"))
+        .args([
+            "slam",
+            "optimize",
+            "--input",
+            &graph("parking-garage.g2o"),
+            "--output",
+            &out_path.to_string_lossy(),
+            "--json",
+        ])
+        .output()
+        .expect("run gcs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    let (initial, fin) = (
+        v["initial_cost"].as_f64().expect("cost"),
+        v["final_cost"].as_f64().expect("cost"),
+    );
+    assert!(
+        fin < initial
+            && v["iterations"].as_u64().expect("n") > 0
+            && v["time_s"].as_f64().expect("t") > 0.0,
+        "{v}"
+    );
+    assert!(
+        v["se_sync_objective"].as_f64().expect("F") <= 1.263 * 1.05,
+        "{v}"
+    );
+    let written = std::fs::read_to_string(&out_path).expect("output");
+    assert_eq!(
+        written
+            .lines()
+            .filter(|l| l.starts_with("VERTEX_SE3:QUAT"))
+            .count(),
+        1661
+    );
+    // The written graph is already optimal: optimising it again changes nothing.
+    let again = Command::new(env!("CARGO_BIN_EXE_gcs"))
+        .args([
+            "slam",
+            "optimize",
+            "--input",
+            &out_path.to_string_lossy(),
+            "--output",
+            &dir.join("again.g2o").to_string_lossy(),
+            "--json",
+        ])
+        .output()
+        .expect("run gcs");
+    let w: serde_json::Value = serde_json::from_slice(&again.stdout).expect("json");
+    assert!(
+        (w["initial_cost"].as_f64().expect("cost") - fin).abs() < 1e-6 * fin.max(1.0),
+        "{w} vs {v}"
+    );
+    std::fs::remove_dir_all(&dir).expect("clean up");
+}
+
+#[test]
+fn optimize_rejects_bad_files_clearly() {
+    let dir = std::env::temp_dir().join(format!("slam-bad-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let bad = dir.join("bad.g2o");
+    std::fs::write(&bad, "VERTEX_SE2 0 0 0 0\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0\n").expect("write");
+    let out = Command::new(env!("CARGO_BIN_EXE_gcs"))
+        .args([
+            "slam",
+            "optimize",
+            "--input",
+            &bad.to_string_lossy(),
+            "--output",
+            &dir.join("o.g2o").to_string_lossy(),
+        ])
+        .output()
+        .expect("run gcs");
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("bad.g2o:2: EDGE_SE2 needs 11 fields"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    std::fs::remove_dir_all(&dir).expect("clean up");
+}
