@@ -9,11 +9,49 @@ use faer::linalg::solvers::Solve;
 use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
 use faer::sparse::{Pair, SparseColMat, SymbolicSparseColMat};
 
-use crate::posegraph::{Graph, Pose, chi2};
+use crate::posegraph::{Edge, Graph, Pose, quad};
+
+/// A robust kernel ρ applied to each edge's squared error s = eᵀΩe.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Kernel {
+    /// ρ(s) = s: plain least squares.
+    None,
+    /// Quadratic up to δ², linear beyond: ρ(s) = 2δ√s − δ².
+    Huber(f64),
+    /// ρ(s) = c² ln(1 + s/c²): large errors count almost nothing.
+    Cauchy(f64),
+}
+
+impl Kernel {
+    /// ρ(s).
+    pub fn cost(self, s: f64) -> f64 {
+        match self {
+            Kernel::None => s,
+            Kernel::Huber(d) if s > d * d => 2.0 * d * s.sqrt() - d * d,
+            Kernel::Huber(_) => s,
+            Kernel::Cauchy(c) => c * c * (s / (c * c)).ln_1p(),
+        }
+    }
+
+    /// ρ'(s): the weight of the edge in the reweighted normal equations.
+    pub fn weight(self, s: f64) -> f64 {
+        match self {
+            Kernel::None => 1.0,
+            Kernel::Huber(d) if s > d * d => d / s.sqrt(),
+            Kernel::Huber(_) => 1.0,
+            Kernel::Cauchy(c) => 1.0 / (1.0 + s / (c * c)),
+        }
+    }
+}
 
 /// Optimiser settings.
 #[derive(Debug, Clone)]
 pub struct Options {
+    /// Robust kernel on every edge.
+    pub kernel: Kernel,
+    /// After converging, switch off loop closures (edges other than `i → i + 1`) whose χ² is
+    /// above this, and optimise again without them.
+    pub outlier_chi2: Option<f64>,
     /// Gauss–Newton (no damping) instead of Levenberg–Marquardt.
     pub gauss_newton: bool,
     /// At most this many iterations.
@@ -25,6 +63,8 @@ pub struct Options {
 impl Default for Options {
     fn default() -> Self {
         Self {
+            kernel: Kernel::None,
+            outlier_chi2: None,
             gauss_newton: false,
             max_iterations: 100,
             relative_tolerance: 1e-9,
@@ -35,10 +75,12 @@ impl Default for Options {
 /// What an optimisation did.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Report {
-    /// chi² before.
+    /// Cost before: Σ ρ(eᵀΩe) (χ² without a kernel).
     pub initial_cost: f64,
-    /// chi² after.
+    /// Cost after.
     pub final_cost: f64,
+    /// Loop closures switched off by the outlier guard.
+    pub rejected_edges: usize,
     /// Iterations accepted.
     pub iterations: usize,
     /// Wall time, seconds.
@@ -114,7 +156,7 @@ struct Linear {
     b: Vec<f64>,
 }
 
-fn linearize<P: Pose>(g: &Graph<P>) -> Linear {
+fn linearize<P: Pose>(g: &Graph<P>, kernel: Kernel) -> Linear {
     let d = P::DOF;
     let nv = g.poses.len().saturating_sub(1);
     let mut diag = vec![0.0; nv * d * d];
@@ -127,6 +169,7 @@ fn linearize<P: Pose>(g: &Graph<P>) -> Linear {
     for edge in &g.edges {
         let (xi, xj) = (&g.poses[edge.i], &g.poses[edge.j]);
         P::error(xi, xj, &edge.z, &mut e0);
+        let weight = kernel.weight(quad(&edge.info, &e0, d));
         // Central differences of the error with respect to both poses' perturbations.
         for k in 0..2 * d {
             delta.iter_mut().for_each(|x| *x = 0.0);
@@ -160,7 +203,7 @@ fn linearize<P: Pose>(g: &Graph<P>) -> Linear {
                 for r in 0..d {
                     s += jac[r * 2 * d + a] * edge.info[r * d + c];
                 }
-                jt_omega[a * d + c] = s;
+                jt_omega[a * d + c] = weight * s;
             }
         }
         let block = |a: usize, bcol: usize| -> f64 {
@@ -231,6 +274,19 @@ fn solve(p: &Pattern, lin: &Linear, d: usize, lambda: f64) -> Result<Vec<f64>, O
     Ok((0..p.n).map(|r| rhs[(r, 0)]).collect())
 }
 
+/// Σ ρ(eᵀΩe) over the edges at `poses`.
+fn cost<P: Pose>(poses: &[P], edges: &[Edge<P>], kernel: Kernel) -> f64 {
+    let d = P::DOF;
+    let mut e = vec![0.0; d];
+    edges
+        .iter()
+        .map(|edge| {
+            P::error(&poses[edge.i], &poses[edge.j], &edge.z, &mut e);
+            kernel.cost(quad(&edge.info, &e, d))
+        })
+        .sum()
+}
+
 fn apply<P: Pose>(poses: &[P], delta: &[f64]) -> Vec<P> {
     let d = P::DOF;
     poses
@@ -243,25 +299,55 @@ fn apply<P: Pose>(poses: &[P], delta: &[f64]) -> Vec<P> {
         .collect()
 }
 
-/// Optimises the graph in place (vertex 0 fixed).
+/// Optimises the graph in place (vertex 0 fixed). With an outlier guard, loop closures that still
+/// disagree after convergence are removed from `g.edges` and the graph is optimised again.
 pub fn optimize<P: Pose>(g: &mut Graph<P>, options: &Options) -> Result<Report, OptimizeError> {
     let start = Instant::now();
-    let initial_cost = chi2(g);
+    let mut report = run_lm(g, options)?;
+    if let Some(limit) = options.outlier_chi2 {
+        let d = P::DOF;
+        let mut e = vec![0.0; d];
+        let before = g.edges.len();
+        let poses = &g.poses;
+        g.edges.retain(|edge| {
+            P::error(&poses[edge.i], &poses[edge.j], &edge.z, &mut e);
+            edge.j == edge.i + 1 || quad(&edge.info, &e, d) <= limit
+        });
+        let rejected = before - g.edges.len();
+        if rejected > 0 {
+            let again = run_lm(g, options)?;
+            report = Report {
+                final_cost: again.final_cost,
+                iterations: report.iterations + again.iterations,
+                rejected_edges: rejected,
+                ..report
+            };
+        }
+    }
+    report.time_s = start.elapsed().as_secs_f64();
+    Ok(report)
+}
+
+fn run_lm<P: Pose>(g: &mut Graph<P>, options: &Options) -> Result<Report, OptimizeError> {
+    let start = Instant::now();
+    let kernel = options.kernel;
+    let initial_cost = cost(&g.poses, &g.edges, kernel);
     if g.poses.len() < 2 || g.edges.is_empty() {
         return Ok(Report {
             initial_cost,
             final_cost: initial_cost,
+            rejected_edges: 0,
             iterations: 0,
             time_s: 0.0,
         });
     }
     let pattern = Pattern::new(g)?;
     let d = P::DOF;
-    let mut cost = initial_cost;
+    let mut current = initial_cost;
     let mut lambda = if options.gauss_newton { 0.0 } else { 1e-5 };
     let mut iterations = 0;
     'outer: while iterations < options.max_iterations {
-        let lin = linearize(g);
+        let lin = linearize(g, kernel);
         loop {
             let step = match solve(&pattern, &lin, d, lambda) {
                 Ok(s) if s.iter().all(|x| x.is_finite()) => s,
@@ -276,20 +362,12 @@ pub fn optimize<P: Pose>(g: &mut Graph<P>, options: &Options) -> Result<Report, 
                 }
                 Err(e) => return Err(e),
             };
-            let trial = Graph {
-                ids: vec![],
-                poses: apply(&g.poses, &step),
-                edges: vec![],
-            };
-            let new_cost = chi2(&Graph {
-                ids: vec![],
-                poses: trial.poses.clone(),
-                edges: g.edges.clone(),
-            });
-            if new_cost < cost || options.gauss_newton {
-                g.poses = trial.poses;
-                let improvement = (cost - new_cost) / cost.max(f64::MIN_POSITIVE);
-                cost = new_cost;
+            let trial = apply(&g.poses, &step);
+            let new_cost = cost(&trial, &g.edges, kernel);
+            if new_cost < current || options.gauss_newton {
+                g.poses = trial;
+                let improvement = (current - new_cost) / current.max(f64::MIN_POSITIVE);
+                current = new_cost;
                 iterations += 1;
                 lambda = (lambda / 3.0).max(if options.gauss_newton { 0.0 } else { 1e-9 });
                 if improvement.abs() < options.relative_tolerance {
@@ -305,7 +383,8 @@ pub fn optimize<P: Pose>(g: &mut Graph<P>, options: &Options) -> Result<Report, 
     }
     Ok(Report {
         initial_cost,
-        final_cost: cost,
+        final_cost: current,
+        rejected_edges: 0,
         iterations,
         time_s: start.elapsed().as_secs_f64(),
     })
@@ -428,7 +507,7 @@ pub fn chordal_init(g: &mut Graph<nalgebra::Isometry3<f64>>) -> Result<(), Optim
 mod tests {
     use super::*;
     use crate::posegraph::tests::data;
-    use crate::posegraph::{AnyGraph, read_g2o, se_sync_objective};
+    use crate::posegraph::{AnyGraph, chi2, read_g2o, se_sync_objective};
 
     fn run(file: &str) -> (f64, Report) {
         let mut g = read_g2o(data(file)).unwrap();
@@ -506,6 +585,82 @@ mod tests {
         // SE-Sync's F* = 2.423e4; GTSAM from a chordal start: error 12117.6 = chi² 24235.2.
         assert!(f <= 2.423e4 * 1.05, "F = {f}, {r:?}");
         assert!(r.final_cost <= 2.0 * 12117.6 * 1.001, "{r:?}");
+    }
+
+    #[test]
+    fn false_loop_closures_do_not_bend_the_map() {
+        let AnyGraph::Se2(clean) = read_g2o(data("intel.g2o")).unwrap() else {
+            panic!("2D")
+        };
+        let mut reference = clean.clone();
+        optimize(&mut reference, &Options::default()).unwrap();
+        // 25 confident but wrong loop closures between random far-apart poses.
+        let mut corrupted = clean.clone();
+        let loop_info = corrupted
+            .edges
+            .iter()
+            .find(|e| e.j != e.i + 1)
+            .map(|e| e.info.clone())
+            .unwrap();
+        let mut x: u64 = 42;
+        let mut next = |m: usize| {
+            x = x
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((x >> 33) as usize) % m
+        };
+        let n = corrupted.poses.len();
+        for _ in 0..25 {
+            let i = next(n - 200);
+            let j = i + 100 + next(100);
+            let z = nalgebra::Isometry2::new(nalgebra::Vector2::new(0.5, -0.3), 0.4);
+            corrupted.edges.push(crate::posegraph::Edge {
+                i,
+                j,
+                z,
+                info: loop_info.clone(),
+            });
+        }
+        let error = |g: &Graph<nalgebra::Isometry2<f64>>| {
+            let sq: f64 = g
+                .poses
+                .iter()
+                .zip(&reference.poses)
+                .map(|(a, b)| (a.translation.vector - b.translation.vector).norm_squared())
+                .sum();
+            (sq / n as f64).sqrt()
+        };
+        let mut plain = corrupted.clone();
+        optimize(&mut plain, &Options::default()).unwrap();
+        let mut robust = corrupted.clone();
+        let r = optimize(
+            &mut robust,
+            &Options {
+                kernel: Kernel::Cauchy(1.0),
+                outlier_chi2: Some(16.27),
+                ..Options::default()
+            },
+        )
+        .unwrap();
+        let (e_plain, e_robust) = (error(&plain), error(&robust));
+        eprintln!("false closures: plain {e_plain:.3} m, robust {e_robust:.4} m, {r:?}");
+        assert!(
+            e_plain > 0.5,
+            "the false closures should bend a plain solution: {e_plain} m"
+        );
+        assert!(
+            e_robust < 0.05,
+            "robust solution off by {e_robust} m ({r:?})"
+        );
+        assert!(r.rejected_edges >= 25, "{r:?}");
+    }
+
+    #[test]
+    fn kernels_shape_large_errors() {
+        assert_eq!(Kernel::Huber(1.0).cost(0.25), 0.25);
+        assert_eq!(Kernel::Huber(1.0).cost(4.0), 3.0);
+        assert!((Kernel::Cauchy(1.0).cost(1e6) - (1e6f64).ln_1p()).abs() < 1e-9);
+        assert!(Kernel::Cauchy(1.0).weight(100.0) < 0.01 && Kernel::None.weight(100.0) == 1.0);
     }
 
     #[test]
