@@ -164,9 +164,11 @@ fn optimize(args: &OptimizeArgs) -> anyhow::Result<()> {
         println!(
             "final_cost    {:.6}   ({}; SE-Sync objective F = {f:.6})",
             report.final_cost,
-            if matches!(kernel, Kernel::None) { "χ²" } else { "Σ ρ(χ²) with the kernel" }
-        ); SE-Sync objective F = {f:.6})",
-            report.final_cost
+            if matches!(kernel, Kernel::None) {
+                "χ²"
+            } else {
+                "Σ ρ(χ²) with the kernel"
+            }
         );
         println!("iterations    {}", report.iterations);
         if report.rejected_edges > 0 {
