@@ -156,7 +156,28 @@ struct Linear {
     b: Vec<f64>,
 }
 
+/// The linear system at the current estimate, with the edges shared out over the cores.
 fn linearize<P: Pose>(g: &Graph<P>, kernel: Kernel) -> Linear {
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get()).clamp(1, 8);
+    let chunk = g.edges.len().div_ceil(threads).max(1);
+    let parts: Vec<Linear> = std::thread::scope(|scope| {
+        let handles: Vec<_> = g.edges.chunks(chunk).map(|edges| scope.spawn(move || linearize_edges(g, edges, kernel))).collect();
+        handles.into_iter().map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))).collect()
+    });
+    let mut parts = parts.into_iter();
+    let Some(mut total) = parts.next() else {
+        return linearize_edges(g, &[], kernel);
+    };
+    for part in parts {
+        total.diag.iter_mut().zip(&part.diag).for_each(|(a, b)| *a += b);
+        total.b.iter_mut().zip(&part.b).for_each(|(a, b)| *a += b);
+        // Off-diagonal blocks stay in edge order, as `entries` laid them out.
+        total.off.extend_from_slice(&part.off);
+    }
+    total
+}
+
+fn linearize_edges<P: Pose>(g: &Graph<P>, edges: &[Edge<P>], kernel: Kernel) -> Linear {
     let d = P::DOF;
     let nv = g.poses.len().saturating_sub(1);
     let mut diag = vec![0.0; nv * d * d];
@@ -166,7 +187,7 @@ fn linearize<P: Pose>(g: &Graph<P>, kernel: Kernel) -> Linear {
     let mut jac = vec![0.0; d * 2 * d]; // d rows × 2d columns (row-major)
     let h = 1e-6;
     let mut delta = vec![0.0; d];
-    for edge in &g.edges {
+    for edge in edges {
         let (xi, xj) = (&g.poses[edge.i], &g.poses[edge.j]);
         P::error(xi, xj, &edge.z, &mut e0);
         let weight = kernel.weight(quad(&edge.info, &e0, d));
