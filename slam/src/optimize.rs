@@ -158,18 +158,31 @@ struct Linear {
 
 /// The linear system at the current estimate, with the edges shared out over the cores.
 fn linearize<P: Pose>(g: &Graph<P>, kernel: Kernel) -> Linear {
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get()).clamp(1, 8);
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .clamp(1, 8);
     let chunk = g.edges.len().div_ceil(threads).max(1);
     let parts: Vec<Linear> = std::thread::scope(|scope| {
-        let handles: Vec<_> = g.edges.chunks(chunk).map(|edges| scope.spawn(move || linearize_edges(g, edges, kernel))).collect();
-        handles.into_iter().map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))).collect()
+        let handles: Vec<_> = g
+            .edges
+            .chunks(chunk)
+            .map(|edges| scope.spawn(move || linearize_edges(g, edges, kernel)))
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+            .collect()
     });
     let mut parts = parts.into_iter();
     let Some(mut total) = parts.next() else {
         return linearize_edges(g, &[], kernel);
     };
     for part in parts {
-        total.diag.iter_mut().zip(&part.diag).for_each(|(a, b)| *a += b);
+        total
+            .diag
+            .iter_mut()
+            .zip(&part.diag)
+            .for_each(|(a, b)| *a += b);
         total.b.iter_mut().zip(&part.b).for_each(|(a, b)| *a += b);
         // Off-diagonal blocks stay in edge order, as `entries` laid them out.
         total.off.extend_from_slice(&part.off);

@@ -105,6 +105,37 @@ pub struct Graph<P> {
     pub edges: Vec<Edge<P>>,
 }
 
+/// The robot a vertex id belongs to. Multi-robot graphs use GTSAM's `Symbol` keys: the robot's
+/// letter in the top 8 bits, the pose number in the rest (`a0`, `a1`, … `b0`, …, as in the DGS
+/// multi-robot datasets); a plain id belongs to robot 0.
+pub fn robot_of_id(id: u64) -> u8 {
+    (id >> 56) as u8
+}
+
+/// The vertex id of pose `number` of `robot` (robot 0: the plain number).
+pub fn vertex_id(robot: u8, number: u64) -> u64 {
+    (u64::from(robot) << 56) | (number & ((1 << 56) - 1))
+}
+
+impl<P: Pose> Graph<P> {
+    /// The robot of vertex `index`.
+    pub fn robot(&self, index: usize) -> u8 {
+        self.ids.get(index).copied().map_or(0, robot_of_id)
+    }
+
+    /// The estimate split per robot: `(robot, [(vertex id, pose)])`, robots in order.
+    pub fn trajectories(&self) -> Vec<(u8, Vec<(u64, P)>)> {
+        let mut out: std::collections::BTreeMap<u8, Vec<(u64, P)>> =
+            std::collections::BTreeMap::new();
+        for (id, p) in self.ids.iter().zip(&self.poses) {
+            out.entry(robot_of_id(*id))
+                .or_default()
+                .push((*id, p.clone()));
+        }
+        out.into_iter().collect()
+    }
+}
+
 /// A g2o graph of either kind.
 #[derive(Debug, Clone)]
 pub enum AnyGraph {
@@ -495,6 +526,25 @@ pub(crate) mod tests {
             };
             assert_eq!((nv, ne), (v, e), "{file}");
         }
+    }
+
+    #[test]
+    fn robots_are_read_from_symbol_keys() {
+        let a = vertex_id(b'a', 0);
+        let b = vertex_id(b'b', 3);
+        let text = format!(
+            "VERTEX_SE2 {a} 0 0 0\nVERTEX_SE2 {b} 1 0 0\nVERTEX_SE2 7 2 0 0\nEDGE_SE2 {a} {b} 1 0 0 1 0 0 1 0 1\n"
+        );
+        let AnyGraph::Se2(g) = parse_g2o(&text, Path::new("m.g2o")).unwrap() else {
+            panic!("2D")
+        };
+        assert_eq!((g.robot(0), g.robot(1), g.robot(2)), (b'a', b'b', 0));
+        let split = g.trajectories();
+        assert_eq!(
+            split.iter().map(|(r, t)| (*r, t.len())).collect::<Vec<_>>(),
+            vec![(0, 1), (b'a', 1), (b'b', 1)]
+        );
+        assert_eq!(split[2].1[0].0 & 0xff, 3);
     }
 
     #[test]
