@@ -24,6 +24,10 @@ pub trait Pose: Clone + Send + Sync + 'static {
     fn compose(a: &Self, b: &Self) -> Self;
     /// The identity.
     fn identity() -> Self;
+    /// (‖R_j − R_i R̃‖²_F, ‖t_j − t_i − R_i t̃‖²) for SE-Sync's objective.
+    fn chordal_residuals(xi: &Self, xj: &Self, z: &Self) -> (f64, f64);
+    /// SE-Sync's isotropic weights (κ, τ) from an edge's information matrix.
+    fn se_sync_weights(info: &[f64]) -> (f64, f64);
 }
 
 impl Pose for Isometry2<f64> {
@@ -46,6 +50,22 @@ impl Pose for Isometry2<f64> {
     }
     fn identity() -> Self {
         Isometry2::identity()
+    }
+    fn chordal_residuals(xi: &Self, xj: &Self, z: &Self) -> (f64, f64) {
+        let (ri, rj, rz) = (
+            xi.rotation.to_rotation_matrix(),
+            xj.rotation.to_rotation_matrix(),
+            z.rotation.to_rotation_matrix(),
+        );
+        let rot = (rj.matrix() - ri.matrix() * rz.matrix()).norm_squared();
+        let tr = (xj.translation.vector - xi.translation.vector - ri * z.translation.vector)
+            .norm_squared();
+        (rot, tr)
+    }
+    fn se_sync_weights(info: &[f64]) -> (f64, f64) {
+        let tt = Matrix2::new(info[0], info[1], info[3], info[4]);
+        let tau = tt.try_inverse().map_or(0.0, |inv| 2.0 / inv.trace());
+        (info[8], tau)
     }
 }
 
@@ -78,6 +98,25 @@ impl Pose for Isometry3<f64> {
     }
     fn identity() -> Self {
         Isometry3::identity()
+    }
+    fn chordal_residuals(xi: &Self, xj: &Self, z: &Self) -> (f64, f64) {
+        let (ri, rj, rz) = (
+            xi.rotation.to_rotation_matrix(),
+            xj.rotation.to_rotation_matrix(),
+            z.rotation.to_rotation_matrix(),
+        );
+        let rot = (rj.matrix() - ri.matrix() * rz.matrix()).norm_squared();
+        let tr = (xj.translation.vector - xi.translation.vector - ri * z.translation.vector)
+            .norm_squared();
+        (rot, tr)
+    }
+    fn se_sync_weights(info: &[f64]) -> (f64, f64) {
+        let block = |o: usize| Matrix3::from_fn(|r, c| info[(o + r) * 6 + o + c]);
+        let tau = block(0).try_inverse().map_or(0.0, |inv| 3.0 / inv.trace());
+        let kappa = block(3)
+            .try_inverse()
+            .map_or(0.0, |inv| 3.0 / (2.0 * inv.trace()));
+        (kappa, tau)
     }
 }
 
@@ -457,46 +496,19 @@ pub(crate) fn quad(m: &[f64], e: &[f64], d: usize) -> f64 {
 /// SE-Sync's objective F (Rosen et al., IJRR 2019) at the graph's estimate, with isotropic weights
 /// from each edge's information: F = Σ κ‖R_j − R_i R̃_ij‖²_F + τ‖t_j − t_i − R_i t̃_ij‖².
 pub fn se_sync_objective(graph: &AnyGraph) -> f64 {
+    fn f<P: Pose>(g: &Graph<P>) -> f64 {
+        g.edges
+            .iter()
+            .map(|e| {
+                let (kappa, tau) = P::se_sync_weights(&e.info);
+                let (rot, tr) = P::chordal_residuals(&g.poses[e.i], &g.poses[e.j], &e.z);
+                kappa * rot + tau * tr
+            })
+            .sum()
+    }
     match graph {
-        AnyGraph::Se2(g) => g
-            .edges
-            .iter()
-            .map(|e| {
-                let m = |r: usize, c: usize| e.info[r * 3 + c];
-                let tt = Matrix2::new(m(0, 0), m(0, 1), m(1, 0), m(1, 1));
-                let tau = tt.try_inverse().map_or(0.0, |inv| 2.0 / inv.trace());
-                let kappa = m(2, 2);
-                let (xi, xj) = (&g.poses[e.i], &g.poses[e.j]);
-                let ri = *xi.rotation.to_rotation_matrix().matrix();
-                let rj = *xj.rotation.to_rotation_matrix().matrix();
-                let rz = *e.z.rotation.to_rotation_matrix().matrix();
-                let rot = (rj - ri * rz).norm_squared();
-                let tr =
-                    (xj.translation.vector - xi.translation.vector - ri * e.z.translation.vector)
-                        .norm_squared();
-                kappa * rot + tau * tr
-            })
-            .sum(),
-        AnyGraph::Se3(g) => g
-            .edges
-            .iter()
-            .map(|e| {
-                let block = |o: usize| Matrix3::from_fn(|r, c| e.info[(o + r) * 6 + o + c]);
-                let tau = block(0).try_inverse().map_or(0.0, |inv| 3.0 / inv.trace());
-                let kappa = block(3)
-                    .try_inverse()
-                    .map_or(0.0, |inv| 3.0 / (2.0 * inv.trace()));
-                let (xi, xj) = (&g.poses[e.i], &g.poses[e.j]);
-                let ri = *xi.rotation.to_rotation_matrix().matrix();
-                let rj = *xj.rotation.to_rotation_matrix().matrix();
-                let rz = *e.z.rotation.to_rotation_matrix().matrix();
-                let rot = (rj - ri * rz).norm_squared();
-                let tr =
-                    (xj.translation.vector - xi.translation.vector - ri * e.z.translation.vector)
-                        .norm_squared();
-                kappa * rot + tau * tr
-            })
-            .sum(),
+        AnyGraph::Se2(g) => f(g),
+        AnyGraph::Se3(g) => f(g),
     }
 }
 
