@@ -10,7 +10,11 @@ use clap::{Parser, Subcommand};
 
 /// Ground control station for cooperative multi-drone exploration.
 #[derive(Parser)]
-#[command(name = "gcs", version, about)]
+#[command(
+    name = "gcs",
+    version,
+    about = "Ground control station for cooperative multi-drone exploration (so far: vehicle links, planning, SLAM back-end tools)"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Top,
@@ -20,7 +24,7 @@ struct Cli {
 enum Top {
     /// One mission-planner step on a map: frontiers, assignment, paths.
     Plan(plan::PlanArgs),
-    /// SLAM tools: trajectory evaluation.
+    /// SLAM back-end tools: pose-graph optimisation and trajectory evaluation.
     Slam {
         #[command(subcommand)]
         command: slam_cmd::SlamCommand,
