@@ -196,38 +196,17 @@ fn linearize_edges<P: Pose>(g: &Graph<P>, edges: &[Edge<P>], kernel: Kernel) -> 
     let mut diag = vec![0.0; nv * d * d];
     let mut off = Vec::new();
     let mut b = vec![0.0; nv * d];
-    let (mut e0, mut ep, mut em) = (vec![0.0; d], vec![0.0; d], vec![0.0; d]);
+    let mut e0 = vec![0.0; d];
+    let (mut ji, mut jj) = (vec![0.0; d * d], vec![0.0; d * d]);
     let mut jac = vec![0.0; d * 2 * d]; // d rows × 2d columns (row-major)
-    let h = 1e-6;
-    let mut delta = vec![0.0; d];
     for edge in edges {
         let (xi, xj) = (&g.poses[edge.i], &g.poses[edge.j]);
         P::error(xi, xj, &edge.z, &mut e0);
         let weight = kernel.weight(quad(&edge.info, &e0, d));
-        // Central differences of the error with respect to both poses' perturbations.
-        for k in 0..2 * d {
-            delta.iter_mut().for_each(|x| *x = 0.0);
-            delta[k % d] = h;
-            let (pi, pj) = if k < d {
-                (xi.retract(&delta), xj.clone())
-            } else {
-                (xi.clone(), xj.retract(&delta))
-            };
-            P::error(&pi, &pj, &edge.z, &mut ep);
-            delta[k % d] = -h;
-            let (mi, mj) = if k < d {
-                (xi.retract(&delta), xj.clone())
-            } else {
-                (xi.clone(), xj.retract(&delta))
-            };
-            P::error(&mi, &mj, &edge.z, &mut em);
-            for r in 0..d {
-                let mut diff = ep[r] - em[r];
-                if d == 3 && r == 2 {
-                    diff = wrap(diff); // SE(2) angle errors wrap
-                }
-                jac[r * 2 * d + k] = diff / (2.0 * h);
-            }
+        P::jacobians(xi, xj, &edge.z, &e0, &mut ji, &mut jj);
+        for r in 0..d {
+            jac[r * 2 * d..r * 2 * d + d].copy_from_slice(&ji[r * d..(r + 1) * d]);
+            jac[r * 2 * d + d..(r + 1) * 2 * d].copy_from_slice(&jj[r * d..(r + 1) * d]);
         }
         // JᵀΩ (2d × d), then JᵀΩJ and JᵀΩe.
         let mut jt_omega = vec![0.0; 2 * d * d];
@@ -272,15 +251,6 @@ fn linearize_edges<P: Pose>(g: &Graph<P>, edges: &[Edge<P>], kernel: Kernel) -> 
         }
     }
     Linear { diag, off, b }
-}
-
-fn wrap(a: f64) -> f64 {
-    let t = std::f64::consts::TAU;
-    let mut a = a.rem_euclid(t);
-    if a > std::f64::consts::PI {
-        a -= t;
-    }
-    a
 }
 
 /// Solves (H + λ·diag(H)) δ = −b on the fixed pattern.

@@ -24,6 +24,9 @@ pub trait Pose: Clone + Send + Sync + 'static {
     fn compose(a: &Self, b: &Self) -> Self;
     /// The identity.
     fn identity() -> Self;
+    /// The Jacobians of [`Pose::error`] with respect to right perturbations of `xi` and `xj`
+    /// (row-major, DOF × DOF each), at the error `e` already computed.
+    fn jacobians(xi: &Self, xj: &Self, z: &Self, e: &[f64], ji: &mut [f64], jj: &mut [f64]);
     /// (‖R_j − R_i R̃‖²_F, ‖t_j − t_i − R_i t̃‖²) for SE-Sync's objective.
     fn chordal_residuals(xi: &Self, xj: &Self, z: &Self) -> (f64, f64);
     /// SE-Sync's isotropic weights (κ, τ) from an edge's information matrix.
@@ -50,6 +53,39 @@ impl Pose for Isometry2<f64> {
     }
     fn identity() -> Self {
         Isometry2::identity()
+    }
+    fn jacobians(xi: &Self, xj: &Self, z: &Self, _e: &[f64], ji: &mut [f64], jj: &mut [f64]) {
+        // e_t = R_zᵀ(R_iᵀ(t_j − t_i) − t_z), e_θ = θ_j − θ_i − θ_z.
+        let rz_t = z.rotation.inverse().to_rotation_matrix().into_inner();
+        let ri_t = xi.rotation.inverse().to_rotation_matrix().into_inner();
+        let rj = xj.rotation.to_rotation_matrix().into_inner();
+        let dt = xj.translation.vector - xi.translation.vector;
+        let (s, c) = xi.rotation.angle().sin_cos();
+        // d(R_iᵀ)/dθ · (t_j − t_i)
+        let a = rz_t * Vector2::new(-s * dt.x + c * dt.y, -c * dt.x - s * dt.y);
+        let b = rz_t * ri_t * rj;
+        ji.copy_from_slice(&[
+            -rz_t[(0, 0)],
+            -rz_t[(0, 1)],
+            a.x,
+            -rz_t[(1, 0)],
+            -rz_t[(1, 1)],
+            a.y,
+            0.0,
+            0.0,
+            -1.0,
+        ]);
+        jj.copy_from_slice(&[
+            b[(0, 0)],
+            b[(0, 1)],
+            0.0,
+            b[(1, 0)],
+            b[(1, 1)],
+            0.0,
+            0.0,
+            0.0,
+            1.0,
+        ]);
     }
     fn chordal_residuals(xi: &Self, xj: &Self, z: &Self) -> (f64, f64) {
         let (ri, rj, rz) = (
@@ -99,6 +135,31 @@ impl Pose for Isometry3<f64> {
     fn identity() -> Self {
         Isometry3::identity()
     }
+    fn jacobians(xi: &Self, xj: &Self, z: &Self, e: &[f64], ji: &mut [f64], jj: &mut [f64]) {
+        // e_t = R_zᵀ(R_iᵀ(t_j − t_i) − t_z), e_r = Log(R_zᵀ R_iᵀ R_j).
+        let rz_t = z.rotation.inverse().to_rotation_matrix().into_inner();
+        let ri = xi.rotation.to_rotation_matrix().into_inner();
+        let rj = xj.rotation.to_rotation_matrix().into_inner();
+        let local = ri.transpose() * (xj.translation.vector - xi.translation.vector);
+        let jr_inv = right_jacobian_inverse(&Vector3::new(e[3], e[4], e[5]));
+        let dt_dti = -rz_t;
+        let dt_dri = rz_t * local.cross_matrix();
+        let dt_dtj = rz_t * ri.transpose() * rj;
+        let dr_dri = -jr_inv * rj.transpose() * ri;
+        let dr_drj = jr_inv;
+        for r in 0..3 {
+            for c in 0..3 {
+                ji[r * 6 + c] = dt_dti[(r, c)];
+                ji[r * 6 + 3 + c] = dt_dri[(r, c)];
+                ji[(3 + r) * 6 + c] = 0.0;
+                ji[(3 + r) * 6 + 3 + c] = dr_dri[(r, c)];
+                jj[r * 6 + c] = dt_dtj[(r, c)];
+                jj[r * 6 + 3 + c] = 0.0;
+                jj[(3 + r) * 6 + c] = 0.0;
+                jj[(3 + r) * 6 + 3 + c] = dr_drj[(r, c)];
+            }
+        }
+    }
     fn chordal_residuals(xi: &Self, xj: &Self, z: &Self) -> (f64, f64) {
         let (ri, rj, rz) = (
             xi.rotation.to_rotation_matrix(),
@@ -142,6 +203,18 @@ pub struct Graph<P> {
     pub poses: Vec<P>,
     /// The measurements.
     pub edges: Vec<Edge<P>>,
+}
+
+/// The inverse right Jacobian of SO(3) at the rotation vector `phi`.
+fn right_jacobian_inverse(phi: &Vector3<f64>) -> Matrix3<f64> {
+    let theta = phi.norm();
+    let w = phi.cross_matrix();
+    let coef = if theta < 1e-4 {
+        1.0 / 12.0 + theta * theta / 720.0
+    } else {
+        1.0 / (theta * theta) - (1.0 + theta.cos()) / (2.0 * theta * theta.sin())
+    };
+    Matrix3::identity() + 0.5 * w + coef * w * w
 }
 
 /// The robot a vertex id belongs to. Multi-robot graphs use GTSAM's `Symbol` keys: the robot's
@@ -537,6 +610,81 @@ pub(crate) mod tests {
                 AnyGraph::Se3(g) => (g.poses.len(), g.edges.len()),
             };
             assert_eq!((nv, ne), (v, e), "{file}");
+        }
+    }
+
+    fn numeric<P: Pose>(xi: &P, xj: &P, z: &P) -> (Vec<f64>, Vec<f64>) {
+        let d = P::DOF;
+        let (mut ji, mut jj) = (vec![0.0; d * d], vec![0.0; d * d]);
+        let (mut ep, mut em) = (vec![0.0; d], vec![0.0; d]);
+        let h = 1e-6;
+        for k in 0..2 * d {
+            let mut delta = vec![0.0; d];
+            delta[k % d] = h;
+            let (pi, pj) = if k < d {
+                (xi.retract(&delta), xj.clone())
+            } else {
+                (xi.clone(), xj.retract(&delta))
+            };
+            P::error(&pi, &pj, z, &mut ep);
+            delta[k % d] = -h;
+            let (mi, mj) = if k < d {
+                (xi.retract(&delta), xj.clone())
+            } else {
+                (xi.clone(), xj.retract(&delta))
+            };
+            P::error(&mi, &mj, z, &mut em);
+            for r in 0..d {
+                let v = (ep[r] - em[r]) / (2.0 * h);
+                if k < d {
+                    ji[r * d + k] = v
+                } else {
+                    jj[r * d + k - d] = v
+                }
+            }
+        }
+        (ji, jj)
+    }
+
+    fn check_jacobians<P: Pose>(
+        xi: &P,
+        xj: &P,
+        z: &P,
+    ) -> Result<(), proptest::test_runner::TestCaseError> {
+        let d = P::DOF;
+        let mut e = vec![0.0; d];
+        P::error(xi, xj, z, &mut e);
+        let (mut ji, mut jj) = (vec![0.0; d * d], vec![0.0; d * d]);
+        P::jacobians(xi, xj, z, &e, &mut ji, &mut jj);
+        let (ni, nj) = numeric(xi, xj, z);
+        for k in 0..d * d {
+            proptest::prop_assert!(
+                (ji[k] - ni[k]).abs() < 1e-5,
+                "d/dxi [{}]: {} vs {}",
+                k,
+                ji[k],
+                ni[k]
+            );
+            proptest::prop_assert!(
+                (jj[k] - nj[k]).abs() < 1e-5,
+                "d/dxj [{}]: {} vs {}",
+                k,
+                jj[k],
+                nj[k]
+            );
+        }
+        Ok(())
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn analytic_jacobians_match_central_differences(
+            a in proptest::collection::vec(-2.0f64..2.0, 18),
+        ) {
+            let se2 = |o: usize| Isometry2::new(Vector2::new(a[o], a[o + 1]), a[o + 2]);
+            check_jacobians(&se2(0), &se2(3), &se2(6))?;
+            let se3 = |o: usize| Isometry3::new(Vector3::new(a[o], a[o + 1], a[o + 2]), Vector3::new(a[o + 3], a[o + 4], a[o + 5]) * 0.5);
+            check_jacobians(&se3(0), &se3(6), &se3(12))?;
         }
     }
 
