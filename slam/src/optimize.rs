@@ -348,7 +348,10 @@ fn run_lm<P: Pose>(g: &mut Graph<P>, options: &Options) -> Result<Report, Optimi
     let pattern = Pattern::new(g)?;
     let d = P::DOF;
     let mut current = initial_cost;
-    let mut lambda = if options.gauss_newton { 0.0 } else { 1e-5 };
+    // Levenberg–Marquardt that tries the undamped (Gauss–Newton) step first and damps only when
+    // a step fails: near the minimum any lasting damping slows weakly determined directions to
+    // linear convergence (parking-garage: 22 iterations damped, 5 undamped).
+    let mut lambda = 0.0;
     let mut iterations = 0;
     'outer: while iterations < options.max_iterations {
         let lin = linearize(g, kernel);
@@ -373,13 +376,13 @@ fn run_lm<P: Pose>(g: &mut Graph<P>, options: &Options) -> Result<Report, Optimi
                 let improvement = (current - new_cost) / current.max(f64::MIN_POSITIVE);
                 current = new_cost;
                 iterations += 1;
-                lambda = (lambda / 3.0).max(if options.gauss_newton { 0.0 } else { 1e-9 });
+                lambda = if lambda < 1e-7 { 0.0 } else { lambda / 10.0 };
                 if improvement.abs() < options.relative_tolerance {
                     break 'outer;
                 }
                 break;
             }
-            lambda *= 4.0;
+            lambda = if lambda == 0.0 { 1e-5 } else { lambda * 10.0 };
             if lambda > 1e8 {
                 break 'outer; // no step lowers the cost: a minimum
             }
