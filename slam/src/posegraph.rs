@@ -5,8 +5,8 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use nalgebra::{
-    Isometry2, Isometry3, Matrix2, Matrix3, Quaternion, Translation3, UnitQuaternion, Vector2,
-    Vector3,
+    Isometry2, Isometry3, Matrix2, Matrix3, Quaternion, SMatrix, SVector, Translation3,
+    UnitQuaternion, Vector2, Vector3,
 };
 
 /// A pose type the optimiser can work with.
@@ -18,8 +18,6 @@ pub trait Pose: Clone + Send + Sync + 'static {
     /// The error of measurement `z` between `xi` and `xj`: translation, then rotation (angle for
     /// SE(2), rotation vector for SE(3)).
     fn error(xi: &Self, xj: &Self, z: &Self, out: &mut [f64]);
-    /// `a⁻¹ · b`.
-    fn between(a: &Self, b: &Self) -> Self;
     /// `a · b`.
     fn compose(a: &Self, b: &Self) -> Self;
     /// The identity.
@@ -44,9 +42,6 @@ impl Pose for Isometry2<f64> {
         out[0] = e.translation.vector.x;
         out[1] = e.translation.vector.y;
         out[2] = e.rotation.angle();
-    }
-    fn between(a: &Self, b: &Self) -> Self {
-        a.inverse() * b
     }
     fn compose(a: &Self, b: &Self) -> Self {
         a * b
@@ -88,15 +83,9 @@ impl Pose for Isometry2<f64> {
         ]);
     }
     fn chordal_residuals(xi: &Self, xj: &Self, z: &Self) -> (f64, f64) {
-        let (ri, rj, rz) = (
-            xi.rotation.to_rotation_matrix(),
-            xj.rotation.to_rotation_matrix(),
-            z.rotation.to_rotation_matrix(),
-        );
-        let rot = (rj.matrix() - ri.matrix() * rz.matrix()).norm_squared();
-        let tr = (xj.translation.vector - xi.translation.vector - ri * z.translation.vector)
-            .norm_squared();
-        (rot, tr)
+        let rot = |p: &Self| p.rotation.to_rotation_matrix().into_inner();
+        let tr = |p: &Self| p.translation.vector;
+        residuals(&rot(xi), &rot(xj), &rot(z), &tr(xi), &tr(xj), &tr(z))
     }
     fn se_sync_weights(info: &[f64]) -> (f64, f64) {
         let tt = Matrix2::new(info[0], info[1], info[3], info[4]);
@@ -125,9 +114,6 @@ impl Pose for Isometry3<f64> {
         out[3] = w.x;
         out[4] = w.y;
         out[5] = w.z;
-    }
-    fn between(a: &Self, b: &Self) -> Self {
-        a.inverse() * b
     }
     fn compose(a: &Self, b: &Self) -> Self {
         a * b
@@ -161,15 +147,9 @@ impl Pose for Isometry3<f64> {
         }
     }
     fn chordal_residuals(xi: &Self, xj: &Self, z: &Self) -> (f64, f64) {
-        let (ri, rj, rz) = (
-            xi.rotation.to_rotation_matrix(),
-            xj.rotation.to_rotation_matrix(),
-            z.rotation.to_rotation_matrix(),
-        );
-        let rot = (rj.matrix() - ri.matrix() * rz.matrix()).norm_squared();
-        let tr = (xj.translation.vector - xi.translation.vector - ri * z.translation.vector)
-            .norm_squared();
-        (rot, tr)
+        let rot = |p: &Self| p.rotation.to_rotation_matrix().into_inner();
+        let tr = |p: &Self| p.translation.vector;
+        residuals(&rot(xi), &rot(xj), &rot(z), &tr(xi), &tr(xj), &tr(z))
     }
     fn se_sync_weights(info: &[f64]) -> (f64, f64) {
         let block = |o: usize| Matrix3::from_fn(|r, c| info[(o + r) * 6 + o + c]);
@@ -203,6 +183,21 @@ pub struct Graph<P> {
     pub poses: Vec<P>,
     /// The measurements.
     pub edges: Vec<Edge<P>>,
+}
+
+/// (‖R_j − R_i R̃‖²_F, ‖t_j − t_i − R_i t̃‖²) in D dimensions.
+fn residuals<const D: usize>(
+    ri: &SMatrix<f64, D, D>,
+    rj: &SMatrix<f64, D, D>,
+    rz: &SMatrix<f64, D, D>,
+    ti: &SVector<f64, D>,
+    tj: &SVector<f64, D>,
+    tz: &SVector<f64, D>,
+) -> (f64, f64) {
+    (
+        (rj - ri * rz).norm_squared(),
+        (tj - ti - ri * tz).norm_squared(),
+    )
 }
 
 /// The inverse right Jacobian of SO(3) at the rotation vector `phi`.
