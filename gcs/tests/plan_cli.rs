@@ -1,15 +1,11 @@
 //! `gcs plan` as a user runs it, on the real building maps.
 
-use std::process::{Command, Output};
+mod common;
+
+use common::gcs;
+
 
 use serde_json::Value;
-
-fn gcs(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_gcs"))
-        .args(args)
-        .output()
-        .expect("run gcs")
-}
 
 fn map(name: &str) -> String {
     format!(

@@ -1,6 +1,10 @@
 //! `gcs link probe` as a user runs it, against real peers: a pymavlink vehicle over UDP and TCP,
 //! the shield emulator over a pseudo-terminal.
 
+mod common;
+
+use common::gcs;
+
 use std::process::{Command, Output};
 use std::time::Duration;
 
@@ -8,13 +12,6 @@ use link::shield::{EmulatorConfig, EmulatorServer};
 use link::{ChannelMap, Pulses};
 use serde_json::Value;
 use tests::{PyVehicle, free_tcp_port, free_udp_port, pty_pair};
-
-fn gcs(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_gcs"))
-        .args(args)
-        .output()
-        .expect("run gcs")
-}
 
 fn json_lines(out: &Output) -> Vec<Value> {
     String::from_utf8_lossy(&out.stdout)

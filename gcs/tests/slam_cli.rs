@@ -1,6 +1,9 @@
 //! `gcs slam eval` on the shared TUM data.
 
-use std::process::Command;
+mod common;
+
+use common::gcs;
+
 
 fn data(name: &str) -> String {
     format!(
@@ -11,18 +14,15 @@ fn data(name: &str) -> String {
 
 #[test]
 fn eval_reproduces_tums_ate_for_rgbdslam() {
-    let out = Command::new(env!("CARGO_BIN_EXE_gcs"))
-        .args([
-            "slam",
-            "eval",
-            "--gt",
-            &data("freiburg1_xyz-groundtruth.txt"),
-            "--est",
-            &data("freiburg1_xyz-rgbdslam.txt"),
-            "--json",
-        ])
-        .output()
-        .expect("run gcs");
+    let out = gcs(&[
+        "slam",
+        "eval",
+        "--gt",
+        &data("freiburg1_xyz-groundtruth.txt"),
+        "--est",
+        &data("freiburg1_xyz-rgbdslam.txt"),
+        "--json",
+    ]);
     assert!(
         out.status.success(),
         "{}",
@@ -41,10 +41,7 @@ fn eval_reproduces_tums_ate_for_rgbdslam() {
 #[test]
 fn eval_errors_are_clear() {
     let run = |gt: &str, est: &str| {
-        let out = Command::new(env!("CARGO_BIN_EXE_gcs"))
-            .args(["slam", "eval", "--gt", gt, "--est", est])
-            .output()
-            .expect("run");
+        let out = gcs(&["slam", "eval", "--gt", gt, "--est", est]);
         assert_eq!(out.status.code(), Some(1));
         String::from_utf8_lossy(&out.stderr).into_owned()
     };
@@ -73,18 +70,15 @@ fn optimize_writes_every_vertex_and_reports_costs() {
     let dir = std::env::temp_dir().join(format!("slam-cli-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let out_path = dir.join("out.g2o");
-    let out = Command::new(env!("CARGO_BIN_EXE_gcs"))
-        .args([
-            "slam",
-            "optimize",
-            "--input",
-            &graph("parking-garage.g2o"),
-            "--output",
-            &out_path.to_string_lossy(),
-            "--json",
-        ])
-        .output()
-        .expect("run gcs");
+    let out = gcs(&[
+        "slam",
+        "optimize",
+        "--input",
+        &graph("parking-garage.g2o"),
+        "--output",
+        &out_path.to_string_lossy(),
+        "--json",
+    ]);
     assert!(
         out.status.success(),
         "{}",
@@ -114,18 +108,15 @@ fn optimize_writes_every_vertex_and_reports_costs() {
         1661
     );
     // The written graph is already optimal: optimising it again changes nothing.
-    let again = Command::new(env!("CARGO_BIN_EXE_gcs"))
-        .args([
-            "slam",
-            "optimize",
-            "--input",
-            &out_path.to_string_lossy(),
-            "--output",
-            &dir.join("again.g2o").to_string_lossy(),
-            "--json",
-        ])
-        .output()
-        .expect("run gcs");
+    let again = gcs(&[
+        "slam",
+        "optimize",
+        "--input",
+        &out_path.to_string_lossy(),
+        "--output",
+        &dir.join("again.g2o").to_string_lossy(),
+        "--json",
+    ]);
     let w: serde_json::Value = serde_json::from_slice(&again.stdout).expect("json");
     assert!(
         (w["initial_cost"].as_f64().expect("cost") - fin).abs() < 1e-6 * fin.max(1.0),
@@ -140,17 +131,14 @@ fn optimize_rejects_bad_files_clearly() {
     std::fs::create_dir_all(&dir).expect("temp dir");
     let bad = dir.join("bad.g2o");
     std::fs::write(&bad, "VERTEX_SE2 0 0 0 0\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0\n").expect("write");
-    let out = Command::new(env!("CARGO_BIN_EXE_gcs"))
-        .args([
-            "slam",
-            "optimize",
-            "--input",
-            &bad.to_string_lossy(),
-            "--output",
-            &dir.join("o.g2o").to_string_lossy(),
-        ])
-        .output()
-        .expect("run gcs");
+    let out = gcs(&[
+        "slam",
+        "optimize",
+        "--input",
+        &bad.to_string_lossy(),
+        "--output",
+        &dir.join("o.g2o").to_string_lossy(),
+    ]);
     assert_eq!(out.status.code(), Some(1));
     assert!(
         String::from_utf8_lossy(&out.stderr).contains("bad.g2o:2: EDGE_SE2 needs 11 fields"),
