@@ -4,7 +4,6 @@ mod common;
 
 use common::gcs;
 
-
 use serde_json::Value;
 
 fn map(name: &str) -> String {

@@ -4,7 +4,6 @@ mod common;
 
 use common::gcs;
 
-
 fn data(name: &str) -> String {
     format!(
         "{}/../../shared/data/rgbd/tum_fr1_xyz_trajectories/{name}",
