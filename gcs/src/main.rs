@@ -1,5 +1,6 @@
 //! `gcs`: the ground control station.
 
+mod explore;
 mod plan;
 mod probe;
 mod slam_cmd;
@@ -22,6 +23,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Top {
+    /// Explore a simulated building with several drones, end to end (the main job).
+    Explore(explore::ExploreArgs),
     /// One mission-planner step on a map: frontiers, assignment, paths.
     Plan(plan::PlanArgs),
     /// SLAM back-end tools: pose-graph optimisation and trajectory evaluation.
@@ -52,6 +55,7 @@ fn main() -> ExitCode {
         .init();
     let cli = Cli::parse();
     let result = match cli.command {
+        Top::Explore(args) => explore::run(&args),
         Top::Plan(args) => plan::run(&args),
         Top::Slam { command } => slam_cmd::run(&command),
         Top::Link {

@@ -89,6 +89,7 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
             StrategyArg::Hungarian => Strategy::Hungarian,
             StrategyArg::Greedy => Strategy::Greedy,
         },
+        ..PlannerConfig::default()
     };
     let t = std::time::Instant::now();
     let p = plan(&map, &robots, &config)?;

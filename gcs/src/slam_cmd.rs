@@ -15,6 +15,32 @@ pub enum SlamCommand {
     Optimize(OptimizeArgs),
     /// Absolute and relative trajectory error of an estimate against ground truth (TUM rules).
     Eval(EvalArgs),
+    /// Run the SLAM (front end and back end) on recorded RGB-D sequences and write the
+    /// trajectories.
+    Run(RunArgs),
+}
+
+/// Arguments of `gcs slam run`.
+#[derive(Args, Debug)]
+pub struct RunArgs {
+    /// A TUM RGB-D folder (associations.txt, rgb/, depth/) or a Redwood / ICL-NUIM folder
+    /// (rgbd.match, color/, depth/, camera_primesense.json). Repeat it for several cameras:
+    /// each is one robot of one graph, frames interleaved by time.
+    #[arg(long, required = true)]
+    dataset: Vec<PathBuf>,
+    /// Write the camera trajectory here (TUM format, camera to map); with several datasets,
+    /// robot k's goes to FILE-robotK (before the extension).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Write the final pose graph here (g2o).
+    #[arg(long)]
+    graph: Option<PathBuf>,
+    /// Process at most this many frames.
+    #[arg(long)]
+    max_frames: Option<usize>,
+    /// Print the result as JSON.
+    #[arg(long)]
+    json: bool,
 }
 
 /// Alignment on the command line.
@@ -90,7 +116,173 @@ pub fn run(command: &SlamCommand) -> anyhow::Result<()> {
     match command {
         SlamCommand::Eval(args) => eval(args),
         SlamCommand::Optimize(args) => optimize(args),
+        SlamCommand::Run(args) => run_dataset(args),
     }
+}
+
+/// Runs the SLAM on one or several recorded sequences (one robot each).
+fn run_dataset(args: &RunArgs) -> anyhow::Result<()> {
+    use slam::dataset::Dataset;
+    use slam::system::{Frame, RobotSetup, Slam, SlamConfig, Tracking};
+    use slam::trajectory::write_tum;
+    let sets: Vec<Dataset> = args
+        .dataset
+        .iter()
+        .map(|d| Dataset::open(d))
+        .collect::<Result<_, _>>()?;
+    // Every frame of every sequence, in time order: (stamp, robot, index).
+    let mut order: Vec<(f64, usize, usize)> = sets
+        .iter()
+        .enumerate()
+        .flat_map(|(k, ds)| {
+            let n = args
+                .max_frames
+                .map_or(ds.frames.len(), |m| m.min(ds.frames.len()));
+            (0..n).map(move |i| (ds.frames[i].stamp, k, i))
+        })
+        .collect();
+    order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    let n = order.len();
+    if n == 0 {
+        bail!("no frames to process in {:?}", args.dataset);
+    }
+    // Hand-held cameras: no start, no vehicle sensors; each sequence maps in its own frame
+    // until an inter-camera match anchors it.
+    let setups = sets
+        .iter()
+        .map(|_| RobotSetup {
+            body_from_camera: nalgebra::Isometry3::identity(),
+            start: None,
+        })
+        .collect();
+    let mut system = Slam::new(
+        SlamConfig {
+            background: false,
+            ..SlamConfig::default()
+        },
+        setups,
+    );
+    let started = std::time::Instant::now();
+    let mut slam_s = 0.0;
+    for (done, &(stamp, k, i)) in order.iter().enumerate() {
+        let ds = &sets[k];
+        let (grey, depth) = ds.load(i)?;
+        let t = std::time::Instant::now();
+        let report = system.process(Frame {
+            robot: k,
+            stamp,
+            grey,
+            depth,
+            depth_scale: ds.depth_scale,
+            camera: ds.camera,
+            heading: None,
+            height: None,
+            predicted_body: None,
+            known_camera_pose: None,
+        })?;
+        slam_s += t.elapsed().as_secs_f64();
+        if let Tracking::Lost(why) = &report.tracking {
+            tracing::warn!("camera {} frame {i}: tracking lost: {why}", k + 1);
+        }
+        if !args.json && ((done + 1) % 50 == 0 || done + 1 == n) {
+            let s = system.stats();
+            eprintln!(
+                "[{}/{n}] {} keyframes, {} loop closures, {} merges",
+                done + 1,
+                s.keyframes,
+                s.loop_closures,
+                s.merges
+            );
+        }
+    }
+    system.finish();
+    let stats = system.stats();
+    let mut robots = vec![];
+    for (k, ds) in sets.iter().enumerate() {
+        let trajectory = system.trajectory(k);
+        let estimate = system.estimate(k).expect("robot set up");
+        if let Some(out) = &args.out {
+            let path = if sets.len() == 1 {
+                out.clone()
+            } else {
+                robot_path(out, k + 1)
+            };
+            write_tum(&path, &trajectory)?;
+        }
+        let ate = ds
+            .ground_truth
+            .as_ref()
+            .and_then(|gt| ate(gt, &trajectory, Alignment::Se3, 0.02));
+        robots.push(json!({
+            "dataset": ds.dir.display().to_string(),
+            "frames": estimate.frames,
+            "tracked": trajectory.len(),
+            "lost": estimate.lost_frames,
+            "keyframes": estimate.keyframes,
+            "in_map": estimate.in_map,
+            "ate_rmse_m": ate.map(|a| a.rmse_m),
+            "ate_pairs": ate.map(|a| a.pairs),
+        }));
+    }
+    if let Some(g) = &args.graph {
+        slam::posegraph::write_g2o(g, &slam::posegraph::AnyGraph::Se3(system.graph()))?;
+    }
+    let per_frame_ms = slam_s / n as f64 * 1e3;
+    let fps = n as f64 / started.elapsed().as_secs_f64();
+    if args.json {
+        println!(
+            "{}",
+            json!({
+                "frames": n,
+                "slam_ms_per_frame": per_frame_ms,
+                "frames_per_second": fps,
+                "keyframes": stats.keyframes,
+                "loop_closures": stats.loop_closures,
+                "rejected_loop_closures": stats.rejected_loop_closures,
+                "merges": stats.merges,
+                "robots": robots,
+            })
+        );
+    } else {
+        println!(
+            "{n} frames: {} keyframes, {} loop closures, {} merges; SLAM {per_frame_ms:.1} ms/frame, {fps:.1} frames/s with image loading",
+            stats.keyframes, stats.loop_closures, stats.merges
+        );
+        for (k, r) in robots.iter().enumerate() {
+            println!(
+                "camera {}: {} of {} frames tracked, {} keyframes{}; {}",
+                k + 1,
+                r["tracked"],
+                r["frames"],
+                r["keyframes"],
+                if r["in_map"] == true {
+                    ""
+                } else {
+                    " (not anchored in the map)"
+                },
+                match r["ate_rmse_m"].as_f64() {
+                    Some(a) => format!(
+                        "ATE RMSE {a:.4} m over {} poses (SE(3) alignment, against the folder's ground truth)",
+                        r["ate_pairs"]
+                    ),
+                    None => "no ground truth to compare with".into(),
+                }
+            );
+        }
+    }
+    Ok(())
+}
+
+/// `traj.txt` → `traj-robot2.txt`.
+fn robot_path(path: &std::path::Path, k: usize) -> PathBuf {
+    let stem = path
+        .file_stem()
+        .map_or_else(|| "trajectory".into(), |s| s.to_string_lossy().into_owned());
+    let name = match path.extension() {
+        Some(e) => format!("{stem}-robot{k}.{}", e.to_string_lossy()),
+        None => format!("{stem}-robot{k}"),
+    };
+    path.with_file_name(name)
 }
 
 fn optimize(args: &OptimizeArgs) -> anyhow::Result<()> {

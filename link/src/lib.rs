@@ -9,9 +9,11 @@
 //!
 //! Both run over a [`Transport`] named by an [`Address`] string (`serial:PATH:BAUD`,
 //! `tcpout:HOST:PORT`, `tcpin:ADDR:PORT`, `udpin:ADDR:PORT`, `udpout:HOST:PORT`) and reconnect
-//! on their own. [`tlog`] reads and writes MAVLink telemetry logs.
+//! on their own. [`tlog`] reads and writes MAVLink telemetry logs; [`camera`] carries RGB-D frames
+//! from a camera to the station.
 
 pub mod address;
+pub mod camera;
 pub mod heartbeat;
 pub mod mavlink;
 pub mod rc;

@@ -125,9 +125,9 @@ pub fn stick_to_us(u: f64) -> u16 {
 /// Gains of the position controller.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PositionGains {
-    /// Forward (body x) loop.
+    /// Map x loop (its output is rotated into the body frame).
     pub x: PidGains,
-    /// Left (body y) loop.
+    /// Map y loop (its output is rotated into the body frame).
     pub y: PidGains,
     /// Height loop.
     pub z: PidGains,
@@ -214,16 +214,18 @@ impl PositionController {
         }
     }
 
-    /// One update. Position errors are rotated into the body frame by the current heading; the
-    /// heading error is wrapped, so −179.9° to 179.9° is a 0.2° turn.
+    /// One update. The x and y loops run on the map-frame errors, and their outputs are rotated
+    /// into the body frame by the current heading (so turning does not look like motion to the
+    /// derivative terms); the heading error is wrapped, so −179.9° to 179.9° is a 0.2° turn.
     pub fn update(&mut self, setpoint: &Pose3, estimate: &Pose3, dt: f64) -> StickCommand {
-        let (ex, ey) = (setpoint.x - estimate.x, setpoint.y - estimate.y);
+        let ax = self.x.update(setpoint.x - estimate.x, dt);
+        let ay = self.y.update(setpoint.y - estimate.y, dt);
         let (s, c) = estimate.yaw.sin_cos();
-        let forward = c * ex + s * ey;
-        let left = -s * ex + c * ey;
+        let forward = c * ax + s * ay;
+        let left = -s * ax + c * ay;
         StickCommand {
-            pitch: self.x.update(forward, dt),
-            roll: -self.y.update(left, dt),
+            pitch: forward.clamp(-1.0, 1.0),
+            roll: (-left).clamp(-1.0, 1.0),
             throttle: self.z.update(setpoint.z - estimate.z, dt),
             // Map yaw is counter-clockwise; a clockwise stick is positive.
             yaw: -self.yaw.update(wrap_angle(setpoint.yaw - estimate.yaw), dt),
@@ -345,5 +347,38 @@ mod tests {
         };
         let s = pc.update(&b, &a, 0.1);
         assert!(s.yaw < 0.0 && s.yaw > -0.02, "{s:?}");
+    }
+
+    #[test]
+    fn turning_on_the_spot_is_not_seen_as_motion() {
+        // A fixed map-frame error while the drone turns: the body-frame command turns with it and
+        // keeps its size (a body-frame derivative would kick at every heading change).
+        let gains = PositionGains {
+            x: PidGains::pid(0.3, 0.0, 0.6),
+            y: PidGains::pid(0.3, 0.0, 0.6),
+            ..PositionGains::default()
+        };
+        let mut pc = PositionController::new(gains);
+        let sp = Pose3 {
+            x: 1.0,
+            y: 0.0,
+            z: 1.0,
+            yaw: 0.0,
+        };
+        let mut sizes = vec![];
+        for i in 0..10 {
+            let est = Pose3 {
+                x: 0.0,
+                y: 0.0,
+                z: 1.0,
+                yaw: 0.3 * f64::from(i),
+            };
+            let s = pc.update(&sp, &est, 0.1);
+            sizes.push(s.pitch.hypot(s.roll));
+        }
+        assert!(
+            sizes[1..].iter().all(|m| (m - sizes[1]).abs() < 1e-9),
+            "{sizes:?}"
+        );
     }
 }

@@ -6,6 +6,7 @@
 
 use std::path::{Path, PathBuf};
 
+use image::codecs::pnm::{PnmEncoder, PnmSubtype, SampleEncoding};
 use image::{GrayImage, Luma, Rgb, RgbImage};
 use serde::Deserialize;
 
@@ -264,7 +265,14 @@ impl Grid {
             };
             img.put_pixel(x as u32, (self.height - 1 - y) as u32, Luma([v]));
         }
-        img.save_with_format(&pgm_path, image::ImageFormat::Pnm)
+        // Binary PGM (P5), as map_server reads it; the image crate's default PNM is PAM (P7).
+        let file = std::fs::File::create(&pgm_path).map_err(|source| MapError::Io {
+            path: pgm_path.clone(),
+            source,
+        })?;
+        let encoder = PnmEncoder::new(std::io::BufWriter::new(file))
+            .with_subtype(PnmSubtype::Graymap(SampleEncoding::Binary));
+        img.write_with_encoder(encoder)
             .map_err(|e| MapError::Image {
                 path: pgm_path.clone(),
                 reason: e.to_string(),
@@ -377,6 +385,10 @@ pub(crate) mod tests {
         let yaml = dir.join("m.yaml");
         g.save(&yaml).unwrap();
         assert_eq!(Grid::load(&yaml).unwrap(), g);
+        // map_server reads binary PGM: "P5", width, height, maxval, then one byte per cell.
+        let pgm = std::fs::read(dir.join("m.pgm")).unwrap();
+        assert!(pgm.starts_with(b"P5\n4 3 255\n"), "{:?}", &pgm[..12]);
+        assert_eq!(pgm.len(), b"P5\n4 3 255\n".len() + 12);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -1,5 +1,7 @@
-//! The local planner (thesis Algorithm 7, 10 Hz): turn toward the current waypoint, then fly
-//! forward; next waypoint within 0.5 m; no valid pose → no commands.
+//! The local planners (10 Hz). [`LocalPlanner`] is thesis Algorithm 7 as written for a drone
+//! without position hold: turn toward the current waypoint, then fly forward; next waypoint within
+//! 0.5 m; no valid pose → no commands. [`PathFollower`] is the same idea for a drone under position
+//! control: turn first, then pursue a carrot along the path.
 //!
 //! The thesis's pseudo-code tests `distance < 0.5 m` the wrong way round (it would fly only when
 //! already there); this follows its text: a waypoint is reached within 0.5 m.
@@ -123,6 +125,172 @@ impl LocalPlanner {
     }
 }
 
+/// Path follower settings.
+#[derive(Debug, Clone)]
+pub struct FollowerConfig {
+    /// The carrot lies this far ahead along the path, metres…
+    pub lookahead_m: f64,
+    /// …but at most this far round the next corner of the path, so the drone does not cut it.
+    pub corner_m: f64,
+    /// Turn on the spot while the bearing to the carrot is off by more than this, radians.
+    pub turn_threshold_rad: f64,
+    /// Having turned, fly again once the bearing is within this, radians.
+    pub resume_threshold_rad: f64,
+    /// The path's end is reached within this distance, metres.
+    pub reach_m: f64,
+}
+
+impl Default for FollowerConfig {
+    fn default() -> Self {
+        Self {
+            lookahead_m: 0.6,
+            corner_m: 0.15,
+            turn_threshold_rad: 30f64.to_radians(),
+            resume_threshold_rad: 10f64.to_radians(),
+            reach_m: 0.3,
+        }
+    }
+}
+
+/// What the path follower asks of the position controller this tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Follow {
+    /// No valid pose or no path: hold position.
+    Hover,
+    /// Hold `at` (the nearest point of the path) and turn to `yaw`.
+    Turn {
+        /// Where to hold, map frame.
+        at: [f64; 2],
+        /// Heading to turn to, radians.
+        yaw: f64,
+    },
+    /// Fly to the carrot, facing `yaw` (the camera looks where the drone goes).
+    Track {
+        /// Position setpoint, map frame.
+        carrot: [f64; 2],
+        /// Heading, radians.
+        yaw: f64,
+    },
+    /// The end of the path has been reached.
+    Arrived,
+}
+
+/// Algorithm 7 for a drone with position control: turn first when the path bends away, then
+/// pursue a carrot a fixed distance ahead along the path (pure pursuit), so the drone stays on
+/// the path the global planner made clear of obstacles instead of cutting its corners.
+#[derive(Debug, Clone, Default)]
+pub struct PathFollower {
+    config: FollowerConfig,
+    path: Vec<[f64; 2]>,
+    segment: usize,
+    turning: bool,
+}
+
+impl PathFollower {
+    /// A follower with no path.
+    pub fn new(config: FollowerConfig) -> Self {
+        Self {
+            config,
+            path: vec![],
+            segment: 0,
+            turning: false,
+        }
+    }
+
+    /// A new path: start again from its first segment.
+    pub fn set_path(&mut self, path: Vec<[f64; 2]>) {
+        self.path = path;
+        self.segment = 0;
+    }
+
+    /// The path being followed.
+    pub fn path(&self) -> &[[f64; 2]] {
+        &self.path
+    }
+
+    /// One tick with the latest pose (`None`: invalid).
+    pub fn step(&mut self, pose: Option<Pose2>) -> Follow {
+        let Some(pose) = pose.filter(|p| p.x.is_finite() && p.y.is_finite() && p.yaw.is_finite())
+        else {
+            return Follow::Hover;
+        };
+        let p = [pose.x, pose.y];
+        let (Some(&first), Some(&end)) = (self.path.first(), self.path.last()) else {
+            return Follow::Hover;
+        };
+        if dist(p, end) < self.config.reach_m {
+            return Follow::Arrived;
+        }
+        if self.path.len() == 1 {
+            return self.aim(pose, first, first);
+        }
+        // Progress: the nearest point on the segments from the current one on (never backwards).
+        let (mut best, mut best_d, mut best_t) = (self.segment, f64::INFINITY, 0.0);
+        for k in self.segment..self.path.len() - 1 {
+            let (t, q) = project(p, self.path[k], self.path[k + 1]);
+            let d = dist(p, q);
+            if d < best_d - 1e-9 {
+                (best, best_d, best_t) = (k, d, t);
+            }
+        }
+        self.segment = best;
+        let (a, b) = (self.path[best], self.path[best + 1]);
+        let nearest = [a[0] + best_t * (b[0] - a[0]), a[1] + best_t * (b[1] - a[1])];
+        // Walk the lookahead along the path from the nearest point, at most `corner_m` round the
+        // next corner.
+        let mut left = self.config.lookahead_m;
+        let mut from = nearest;
+        let mut carrot = end;
+        for k in best..self.path.len() - 1 {
+            let to = self.path[k + 1];
+            let len = dist(from, to);
+            if len >= left {
+                let f = left / len.max(1e-12);
+                carrot = [
+                    from[0] + f * (to[0] - from[0]),
+                    from[1] + f * (to[1] - from[1]),
+                ];
+                break;
+            }
+            left = (left - len).min(self.config.corner_m);
+            from = to;
+        }
+        self.aim(pose, nearest, carrot)
+    }
+
+    fn aim(&mut self, pose: Pose2, nearest: [f64; 2], carrot: [f64; 2]) -> Follow {
+        let (dx, dy) = (carrot[0] - pose.x, carrot[1] - pose.y);
+        let yaw = dy.atan2(dx);
+        let error = wrap_angle(yaw - pose.yaw).abs();
+        self.turning = if self.turning {
+            error > self.config.resume_threshold_rad
+        } else {
+            error > self.config.turn_threshold_rad
+        };
+        if self.turning {
+            Follow::Turn { at: nearest, yaw }
+        } else {
+            Follow::Track { carrot, yaw }
+        }
+    }
+}
+
+fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
+    (a[0] - b[0]).hypot(a[1] - b[1])
+}
+
+/// The nearest point to `p` on segment `a`–`b`, and its parameter in [0, 1].
+fn project(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> (f64, [f64; 2]) {
+    let (vx, vy) = (b[0] - a[0], b[1] - a[1]);
+    let len2 = vx * vx + vy * vy;
+    let t = if len2 < 1e-18 {
+        0.0
+    } else {
+        (((p[0] - a[0]) * vx + (p[1] - a[1]) * vy) / len2).clamp(0.0, 1.0)
+    };
+    (t, [a[0] + t * vx, a[1] + t * vy])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -212,6 +380,73 @@ mod tests {
             })),
             LocalCommand::Hover
         );
+    }
+
+    fn pose(x: f64, y: f64, yaw: f64) -> Option<Pose2> {
+        Some(Pose2 { x, y, yaw })
+    }
+
+    #[test]
+    fn the_follower_turns_first_then_pursues_a_carrot_on_the_path() {
+        let mut f = PathFollower::new(FollowerConfig::default());
+        f.set_path(vec![[0.0, 0.0], [4.0, 0.0], [4.0, 4.0]]);
+        // Facing +y at the start: the path goes +x, so turn first, holding the path's nearest point.
+        match f.step(pose(0.0, 0.1, FRAC_PI_2)) {
+            Follow::Turn { at, yaw } => {
+                // Toward the carrot (0.6, 0) from (0, 0.1).
+                assert!(
+                    (yaw - (-0.1f64).atan2(0.6)).abs() < 1e-9
+                        && at[0].abs() < 1e-9
+                        && at[1].abs() < 1e-9,
+                    "{at:?} {yaw}"
+                );
+            }
+            c => panic!("{c:?}"),
+        }
+        // Still 20° off: keep turning (hysteresis), then within 10° fly.
+        assert!(matches!(f.step(pose(0.0, 0.0, 0.35)), Follow::Turn { .. }));
+        match f.step(pose(1.0, 0.05, 0.0)) {
+            Follow::Track { carrot, .. } => {
+                // 0.6 m ahead of the nearest point (1, 0), on the path — not toward (4, 0) from
+                // the drone, which would keep its 5 cm error.
+                assert!(
+                    (carrot[0] - 1.6).abs() < 1e-9 && carrot[1].abs() < 1e-9,
+                    "{carrot:?}"
+                );
+            }
+            c => panic!("{c:?}"),
+        }
+        // Near the corner the carrot goes round it (at most 0.15 m): turn toward it, then track it.
+        assert!(
+            matches!(f.step(pose(3.8, 0.0, 0.0)), Follow::Turn { yaw, .. } if (yaw - 0.15f64.atan2(0.2)).abs() < 1e-9)
+        );
+        match f.step(pose(3.8, 0.0, 0.15f64.atan2(0.2))) {
+            Follow::Track { carrot, .. } => assert!(
+                (carrot[0] - 4.0).abs() < 1e-9 && (carrot[1] - 0.15).abs() < 1e-9,
+                "{carrot:?}"
+            ),
+            c => panic!("{c:?}"),
+        }
+        // Progress never goes back to the first segment.
+        f.step(pose(4.0, 1.0, FRAC_PI_2));
+        match f.step(pose(3.0, 0.0, FRAC_PI_2)) {
+            Follow::Turn { at, .. } | Follow::Track { carrot: at, .. } => {
+                assert!(at[0] >= 3.99, "{at:?}")
+            }
+            c => panic!("{c:?}"),
+        }
+        assert_eq!(f.step(pose(4.0, 3.8, FRAC_PI_2)), Follow::Arrived);
+    }
+
+    #[test]
+    fn the_follower_hovers_without_pose_or_path() {
+        let mut f = PathFollower::new(FollowerConfig::default());
+        assert_eq!(f.step(pose(0.0, 0.0, 0.0)), Follow::Hover);
+        f.set_path(vec![[1.0, 0.0]]);
+        assert_eq!(f.step(None), Follow::Hover);
+        assert_eq!(f.step(pose(f64::NAN, 0.0, 0.0)), Follow::Hover);
+        assert!(matches!(f.step(pose(0.0, 0.0, 0.0)), Follow::Track { .. }));
+        assert_eq!(f.step(pose(0.9, 0.0, 0.0)), Follow::Arrived);
     }
 
     #[test]

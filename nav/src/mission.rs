@@ -5,7 +5,9 @@ use crate::assignment::{greedy, hungarian};
 use crate::frontier::{Frontier, frontiers};
 use crate::grid::{Cell, CellXY, Grid};
 use crate::inflate::inflate;
-use crate::search::{DistanceField, Graph, UNREACHABLE, dijkstra, metres, nearest_free, simplify};
+use crate::search::{
+    DistanceField, Graph, UNREACHABLE, astar, dijkstra, metres, nearest_free, simplify,
+};
 
 /// How robots are matched to frontiers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -25,6 +27,12 @@ pub struct PlannerConfig {
     pub min_frontier_cells: usize,
     /// Assignment strategy.
     pub strategy: Strategy,
+    /// Frontiers whose goal lies within `blacklist_radius_m` of one of these points are ignored
+    /// (places a robot reached without the frontier going away, e.g. unknown space inside solid
+    /// furniture), map frame.
+    pub blacklist: Vec<[f64; 2]>,
+    /// Radius around blacklisted points, metres.
+    pub blacklist_radius_m: f64,
 }
 
 impl Default for PlannerConfig {
@@ -33,6 +41,8 @@ impl Default for PlannerConfig {
             robot_radius_m: 0.3,
             min_frontier_cells: 5,
             strategy: Strategy::Hungarian,
+            blacklist: vec![],
+            blacklist_radius_m: 0.5,
         }
     }
 }
@@ -57,8 +67,9 @@ pub struct Plan {
     pub inflated: Grid,
     /// The frontiers, largest first.
     pub frontiers: Vec<Frontier>,
-    /// Robots × frontiers, metres, after the thesis's rules (unreachable → the largest finite cost,
-    /// invalid pose → largest + 10).
+    /// Robots × frontiers, metres, after the thesis's rules: unreachable → the largest finite cost
+    /// plus 1 (strictly more than any reachable frontier, so a tie never sends a robot to a frontier
+    /// it cannot reach while it could reach another), invalid pose → largest + 10.
     pub costs: Vec<Vec<f64>>,
     /// Per robot, in input order.
     pub robots: Vec<RobotPlan>,
@@ -118,7 +129,16 @@ pub fn plan(
         })
         .collect::<Result<Vec<Option<CellXY>>, _>>()?;
     let inflated = inflate(map, config.robot_radius_m);
-    let frontiers = frontiers(&inflated, config.min_frontier_cells);
+    let frontiers: Vec<Frontier> = frontiers(&inflated, config.min_frontier_cells)
+        .into_iter()
+        .filter(|f| {
+            let g = inflated.center_of(f.goal);
+            config
+                .blacklist
+                .iter()
+                .all(|b| (b[0] - g[0]).hypot(b[1] - g[1]) > config.blacklist_radius_m)
+        })
+        .collect();
     // A robot inside the inflated band around a wall starts from the nearest free cell.
     let reach = (config.robot_radius_m / map.resolution()).ceil() as usize * 2 + 2;
     let graph = Graph::new(&inflated);
@@ -151,7 +171,7 @@ pub fn plan(
                     if f.is_none() {
                         largest + 10.0
                     } else {
-                        c.unwrap_or(largest)
+                        c.unwrap_or(largest + 1.0)
                     }
                 })
                 .collect()
@@ -214,6 +234,29 @@ pub fn plan(
         costs,
         robots: robots_out,
     })
+}
+
+/// A collision-free route from `from` to `to` (map frame, metres) on `map` with obstacles grown
+/// by `robot_radius_m`: A* over free cells (8-connected), both ends moved to the nearest free
+/// cell, simplified to straight segments. `None` when either end is off the map or no route
+/// exists. The global planner for a drone flying home.
+pub fn route(
+    map: &Grid,
+    from: [f64; 2],
+    to: [f64; 2],
+    robot_radius_m: f64,
+) -> Option<Vec<[f64; 2]>> {
+    let inflated = inflate(map, robot_radius_m);
+    let reach = (robot_radius_m / map.resolution()).ceil() as usize * 2 + 2;
+    let a = nearest_free(&inflated, map.cell_of(from)?, reach)?;
+    let b = nearest_free(&inflated, map.cell_of(to)?, reach)?;
+    let (_, cells) = astar(&inflated, a, b)?;
+    Some(
+        simplify(&inflated, &cells)
+            .into_iter()
+            .map(|c| inflated.center_of(c))
+            .collect(),
+    )
 }
 
 /// One Dijkstra per robot, spread over the available cores.
@@ -475,5 +518,48 @@ mod tests {
                 cost(&b)
             );
         }
+    }
+
+    #[test]
+    fn blacklisted_frontiers_are_ignored() {
+        let map = toy();
+        let robots = [Some([1.0, 1.0])];
+        let all = plan(&map, &robots, &toy_config()).unwrap();
+        assert!(all.frontiers.len() >= 2, "{:?}", all.frontiers);
+        let first = all.inflated.center_of(all.frontiers[0].goal);
+        let config = PlannerConfig {
+            blacklist: vec![first],
+            ..toy_config()
+        };
+        let p = plan(&map, &robots, &config).unwrap();
+        assert_eq!(p.frontiers.len(), all.frontiers.len() - 1);
+        assert!(p.frontiers.iter().all(|f| f.goal != all.frontiers[0].goal));
+    }
+
+    #[test]
+    fn an_unreachable_frontier_never_ties_with_the_farthest_reachable_one() {
+        // Robot in the left room; the left room's frontier is reachable; a second frontier is
+        // walled off. Unreachable used to cost exactly the largest reachable cost: with one robot
+        // and two frontiers that tie went to the first (the unreachable one) and the robot hovered.
+        let map = grid_with(
+            &[
+                "##############",
+                "#......#.....?",
+                "#......#.....?",
+                "#......#######",
+                "?.........#..#",
+                "?.........#..#",
+                "##############",
+            ],
+            0.25,
+        );
+        let p = plan(&map, &[Some([0.6, 0.6])], &toy_config()).unwrap();
+        assert_eq!(p.frontiers.len(), 2, "{:?}", p.frontiers);
+        let r = &p.robots[0];
+        assert!(r.frontier.is_some() && !r.path.is_empty(), "{r:?}");
+        let reachable = r.frontier.unwrap();
+        let other = 1 - reachable;
+        assert!(p.costs[0][other] > p.costs[0][reachable], "{:?}", p.costs);
+        assert!(!p.complete);
     }
 }

@@ -125,6 +125,11 @@ impl ShieldEmulator {
         self.sensors = sensors;
     }
 
+    /// Queues a text message for the station (what the firmware prints, e.g. a collision).
+    pub fn report(&mut self, text: &str) {
+        UpRepr::Text(text.into()).emit(&mut self.upstream);
+    }
+
     /// Queues raw bytes for the station, e.g. noise for a fault-injection test.
     pub fn queue_upstream_raw(&mut self, bytes: &[u8]) {
         self.upstream.extend_from_slice(bytes);
@@ -294,13 +299,16 @@ impl ShieldEmulator {
     }
 }
 
+/// The firmware's clock: time since the shield powered up (real or simulated).
+pub type Clock = Arc<dyn Fn() -> Duration + Send + Sync>;
+
 /// Runs a [`ShieldEmulator`] on one connection until `stop` or the connection fails: reads
 /// commands, writes acknowledgements and telemetry.
 pub fn serve(
     emulator: &Mutex<ShieldEmulator>,
     mut conn: Connection,
     stop: &AtomicBool,
-    start: Instant,
+    clock: &Clock,
 ) {
     let mut buf = [0u8; 256];
     while !stop.load(Ordering::Relaxed) {
@@ -319,7 +327,7 @@ pub fn serve(
         };
         let up = {
             let mut em = emulator.lock().unwrap_or_else(PoisonError::into_inner);
-            em.receive(&buf[..got], start.elapsed());
+            em.receive(&buf[..got], clock());
             em.take_upstream()
         };
         if !up.is_empty()
@@ -336,76 +344,116 @@ pub fn serve(
 /// connected, so the link-loss failsafe fires when the station disappears.
 pub struct EmulatorServer {
     emulator: Arc<Mutex<ShieldEmulator>>,
+    connected: Arc<AtomicBool>,
     stop: Arc<AtomicBool>,
     threads: Vec<JoinHandle<()>>,
 }
 
 impl EmulatorServer {
-    /// Serves `transport` (e.g. `tcpin:127.0.0.1:0`) with a new emulator.
-    pub fn spawn(mut transport: Transport, config: EmulatorConfig) -> Self {
-        Self::start(config, move |em, stop, connected, start| {
+    /// Serves `transport` (e.g. `tcpin:127.0.0.1:0`) with a new emulator on a real-time clock.
+    pub fn spawn(transport: Transport, config: EmulatorConfig) -> Self {
+        let start = Instant::now();
+        let mut server =
+            Self::spawn_simulated(transport, config, Arc::new(move || start.elapsed()));
+        server.start_clock(start);
+        server
+    }
+
+    /// Serves `transport` with a new emulator whose time is `clock` (a simulator's). Nothing
+    /// ticks it: the owner calls [`EmulatorServer::tick`] as its time advances.
+    pub fn spawn_simulated(mut transport: Transport, config: EmulatorConfig, clock: Clock) -> Self {
+        Self::start(config, move |em, stop, connected| {
             run_sessions(
                 &mut transport,
                 stop,
                 |up| connected.store(up, Ordering::Relaxed),
-                |conn| serve(em, conn, stop, start),
+                |conn| serve(em, conn, stop, &clock),
             );
         })
     }
 
     /// Serves one already-open connection (e.g. the master side of a pseudo-terminal pair).
     pub fn spawn_on(conn: Connection, config: EmulatorConfig) -> Self {
-        Self::start(config, move |em, stop, connected, start| {
+        let start = Instant::now();
+        let clock: Clock = Arc::new(move || start.elapsed());
+        let mut server = Self::start(config, move |em, stop, connected| {
             connected.store(true, Ordering::Relaxed);
-            serve(em, conn, stop, start);
+            serve(em, conn, stop, &clock);
             connected.store(false, Ordering::Relaxed);
-        })
+        });
+        server.start_clock(start);
+        server
     }
 
     fn start(
         config: EmulatorConfig,
-        io: impl FnOnce(&Mutex<ShieldEmulator>, &AtomicBool, &AtomicBool, Instant) + Send + 'static,
+        io: impl FnOnce(&Mutex<ShieldEmulator>, &AtomicBool, &AtomicBool) + Send + 'static,
     ) -> Self {
         let emulator = Arc::new(Mutex::new(ShieldEmulator::new(config)));
         let stop = Arc::new(AtomicBool::new(false));
         let connected = Arc::new(AtomicBool::new(false));
-        let start = Instant::now();
-        let mut threads = vec![];
         let (em, st, co) = (emulator.clone(), stop.clone(), connected.clone());
-        threads.extend(
-            std::thread::Builder::new()
-                .name("shield-emulator".into())
-                .spawn(move || io(&em, &st, &co, start))
-                .ok(),
-        );
-        let (em, st) = (emulator.clone(), stop.clone());
-        threads.extend(
-            std::thread::Builder::new()
-                .name("shield-clock".into())
-                .spawn(move || {
-                    while !st.load(Ordering::Relaxed) {
-                        {
-                            let mut e = em.lock().unwrap_or_else(PoisonError::into_inner);
-                            e.tick(start.elapsed());
-                            if !connected.load(Ordering::Relaxed) {
-                                e.take_upstream(); // a UART with nobody listening
-                            }
-                        }
-                        std::thread::sleep(Duration::from_millis(20));
-                    }
-                })
-                .ok(),
-        );
+        let threads = std::thread::Builder::new()
+            .name("shield-emulator".into())
+            .spawn(move || io(&em, &st, &co))
+            .ok()
+            .into_iter()
+            .collect();
         Self {
             emulator,
+            connected,
             stop,
             threads,
         }
     }
 
+    /// Ticks the firmware every 20 ms of real time.
+    fn start_clock(&mut self, start: Instant) {
+        let (em, st, co) = (
+            self.emulator.clone(),
+            self.stop.clone(),
+            self.connected.clone(),
+        );
+        let clock = std::thread::Builder::new()
+            .name("shield-clock".into())
+            .spawn(move || {
+                while !st.load(Ordering::Relaxed) {
+                    tick(&em, &co, start.elapsed());
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+            });
+        self.threads.extend(clock.ok());
+    }
+
+    /// Advances the firmware's clock to `now`: failsafe, landing, telemetry. Telemetry nobody
+    /// is connected to read is dropped, like a UART with nobody listening.
+    pub fn tick(&self, now: Duration) {
+        tick(&self.emulator, &self.connected, now);
+    }
+
+    /// Stops serving the transport, as a radio that dies: the connection closes and nothing
+    /// more arrives, while the firmware keeps running on [`EmulatorServer::tick`] (so its
+    /// link-loss failsafe lands the vehicle).
+    pub fn disconnect(&self) {
+        self.stop.store(true, Ordering::Relaxed);
+    }
+
+    /// True while a station is connected.
+    pub fn connected(&self) -> bool {
+        self.connected.load(Ordering::Relaxed)
+    }
+
     /// Runs `f` on the emulator's state.
     pub fn with<R>(&self, f: impl FnOnce(&mut ShieldEmulator) -> R) -> R {
         f(&mut self.emulator.lock().unwrap_or_else(PoisonError::into_inner))
+    }
+}
+
+fn tick(emulator: &Mutex<ShieldEmulator>, connected: &AtomicBool, now: Duration) {
+    let mut e = emulator.lock().unwrap_or_else(PoisonError::into_inner);
+    e.tick(now);
+    if !connected.load(Ordering::Relaxed) {
+        e.take_upstream();
     }
 }
 

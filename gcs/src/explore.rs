@@ -1,0 +1,489 @@
+//! `gcs explore`: cooperative exploration of a simulated building, end to end — the main job.
+//!
+//! The simulator runs in-process with every vehicle on its own loopback socket, reached through
+//! the real link adapters (MAVLink or the shield protocol) exactly as hardware would be. The
+//! mission runtime explores until no reachable frontier is left and lands every drone; the map,
+//! the trajectories, the MCAP log (and `.tlog`s of MAVLink traffic) and a summary are written.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use clap::{Args, ValueEnum};
+use nav::grid::Grid;
+use nav::mission::Strategy;
+use sitl::World;
+use slam::eval::{Alignment, ate};
+use slam::system::{Slam, SlamConfig};
+use slam::trajectory::Stamped;
+
+use gcs::evaluate::{WallError, coverage, reachable_free, wall_error};
+use gcs::fleet::{LinkKind, SimFleet, SimFleetConfig, sim_body_from_camera};
+use gcs::outputs;
+use gcs::record::{Record, Recorder, Setup, SetupDrone};
+use gcs::runtime::drone::Phase;
+use gcs::runtime::{MissionState, Outcome, Runtime, RuntimeConfig};
+
+/// Arguments of `gcs explore`.
+#[derive(Args, Debug, Clone)]
+pub struct ExploreArgs {
+    /// A built-in world (apartment) or a world file (.txt, map_server .yaml, HouseExpo .json).
+    #[arg(long, default_value = sitl::world::DEFAULT_WORLD)]
+    pub world: String,
+    /// Number of drones (1–8).
+    #[arg(long, default_value_t = 2)]
+    pub drones: usize,
+    /// How the station talks to the drones.
+    #[arg(long, value_enum, default_value_t = LinkKind::Mavlink)]
+    pub link: LinkKind,
+    /// How frontiers are assigned.
+    #[arg(long, value_enum, default_value_t = StrategyArg::Hungarian)]
+    pub strategy: StrategyArg,
+    /// Simulated seconds per real second (0.1–20).
+    #[arg(long, default_value_t = 3.0)]
+    pub speed: f64,
+    /// Seed of the simulator's noise.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Give up (and land) after this many simulated seconds.
+    #[arg(long, default_value_t = 900.0)]
+    pub timeout: f64,
+    /// Where to write the map, trajectories, log and summary.
+    #[arg(long, default_value = "explore-out")]
+    pub out: PathBuf,
+    /// Print the summary as JSON on stdout (progress still goes to stderr).
+    #[arg(long)]
+    pub json: bool,
+    /// Where the drones' poses come from: the multi-robot SLAM on their cameras (`slam`), or the
+    /// simulator's ground truth (`truth`, to measure navigation alone).
+    #[arg(long, value_enum, default_value_t = PoseSource::Slam)]
+    pub poses: PoseSource,
+    /// Do not record the MCAP log and `.tlog`s.
+    #[arg(long)]
+    pub no_log: bool,
+    /// Kill drone K's link (1-based) at simulated time T seconds: `K@T` (a fault for tests and
+    /// demonstrations; the others must finish the map).
+    #[arg(long, value_name = "K@T")]
+    pub kill_link: Option<String>,
+}
+
+/// Where the runtime's poses come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum PoseSource {
+    /// The multi-robot SLAM on every drone's camera.
+    Slam,
+    /// The simulator's ground truth.
+    Truth,
+}
+
+/// Assignment strategy.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum StrategyArg {
+    /// Least total cost (Hungarian algorithm).
+    Hungarian,
+    /// Cheapest pair first.
+    Greedy,
+}
+
+impl StrategyArg {
+    fn strategy(self) -> Strategy {
+        match self {
+            StrategyArg::Hungarian => Strategy::Hungarian,
+            StrategyArg::Greedy => Strategy::Greedy,
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            StrategyArg::Hungarian => "hungarian",
+            StrategyArg::Greedy => "greedy",
+        }
+    }
+}
+
+/// The end of an exploration, as written to `summary.json`.
+#[derive(Debug, serde::Serialize)]
+pub struct Summary {
+    /// No reachable frontier was left.
+    pub completed: bool,
+    /// How the mission ended.
+    pub outcome: String,
+    /// Simulated seconds from the start to the last drone down.
+    pub exploration_time_s: f64,
+    /// Fraction of the free space reachable from the starts that the map knows as free.
+    pub coverage: f64,
+    /// How far the map's walls lie from the world's.
+    pub wall_error: Option<WallError>,
+    /// Wall collisions of all drones.
+    pub collisions: u32,
+    /// Every drone ended on the ground, disarmed.
+    pub all_landed: bool,
+    /// The world.
+    pub world: String,
+    /// The link protocol.
+    pub link: &'static str,
+    /// The assignment strategy.
+    pub strategy: &'static str,
+    /// Where poses came from.
+    pub pose_source: &'static str,
+    /// Loop closures in the final graph.
+    pub loop_closures: usize,
+    /// Keyframes in the final graph.
+    pub keyframes: usize,
+    /// Per drone.
+    pub drones: Vec<DroneSummary>,
+}
+
+/// One drone in the summary.
+#[derive(Debug, serde::Serialize)]
+pub struct DroneSummary {
+    /// 1-based id.
+    pub id: usize,
+    /// Distance flown (ground truth), metres.
+    pub path_length_m: f64,
+    /// The SLAM's final camera trajectory against the simulator's (SE(3)-aligned), metres;
+    /// `null` when flying on ground truth.
+    pub ate_rmse_m: Option<f64>,
+    /// The camera poses as estimated while flying (before later loop closures), metres.
+    pub ate_online_rmse_m: Option<f64>,
+    /// Horizontal error of the pose the drone flew on (the filter's) against the simulator,
+    /// RMS over the flight, metres.
+    pub flight_pose_error_m: Option<f64>,
+    /// Camera frames the SLAM could not track.
+    pub lost_frames: usize,
+    /// Wall collisions.
+    pub collisions: u32,
+    /// The phase it ended in.
+    pub final_phase: &'static str,
+}
+
+fn validate(args: &ExploreArgs) -> anyhow::Result<Option<(usize, f64)>> {
+    if !(1..=8).contains(&args.drones) {
+        bail!("--drones {} must be 1 to 8", args.drones);
+    }
+    if !(args.speed.is_finite() && (0.1..=20.0).contains(&args.speed)) {
+        bail!(
+            "--speed {} must be between 0.1 and 20 (simulated seconds per second)",
+            args.speed
+        );
+    }
+    if !(args.timeout.is_finite() && args.timeout > 0.0) {
+        bail!(
+            "--timeout {} must be a positive number of simulated seconds",
+            args.timeout
+        );
+    }
+    let kill = match &args.kill_link {
+        None => None,
+        Some(s) => {
+            let parsed = s.split_once('@').and_then(|(k, t)| {
+                let k: usize = k.trim().parse().ok()?;
+                let t: f64 = t.trim().parse().ok()?;
+                (k >= 1 && k <= args.drones && t.is_finite() && t >= 0.0).then_some((k - 1, t))
+            });
+            Some(parsed.ok_or_else(|| {
+                anyhow::anyhow!(
+                    "--kill-link {s:?}: expected K@T with K a drone 1 to {} and T simulated seconds, e.g. 2@60",
+                    args.drones
+                )
+            })?)
+        }
+    };
+    Ok(kill)
+}
+
+/// Runs `gcs explore`.
+pub fn run(args: &ExploreArgs) -> anyhow::Result<()> {
+    let kill = validate(args)?;
+    let world = Arc::new(World::load(&args.world)?);
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create the output folder {}", args.out.display()))?;
+    let fleet = SimFleet::start(&SimFleetConfig {
+        world: world.clone(),
+        drones: args.drones,
+        link: args.link,
+        speed: args.speed,
+        seed: args.seed,
+        tlog_dir: (!args.no_log).then(|| args.out.clone()),
+    })?;
+    eprintln!(
+        "explore: world '{}', {} drone(s) over {}, {} assignment, poses from {}, {}× real time",
+        world.name(),
+        args.drones,
+        args.link.name(),
+        args.strategy.name(),
+        match args.poses {
+            PoseSource::Slam => "SLAM",
+            PoseSource::Truth => "ground truth",
+        },
+        args.speed
+    );
+    let recorder = if args.no_log {
+        None
+    } else {
+        let r = Recorder::create(&args.out.join("mission.mcap"))?;
+        let b = sim_body_from_camera();
+        let (t, q) = (b.translation.vector, b.rotation);
+        r.send(Record::Setup(Setup {
+            version: 1,
+            world: Some(world.name().into()),
+            strategy: args.strategy.name().into(),
+            drones: fleet
+                .drones
+                .iter()
+                .map(|d| SetupDrone {
+                    name: d.name.clone(),
+                    start: d.start,
+                    body_from_camera: [t.x, t.y, t.z, q.i, q.j, q.k, q.w],
+                    altitude: d.altitude,
+                })
+                .collect(),
+        }));
+        Some(r)
+    };
+    let slam = Slam::new(
+        SlamConfig {
+            known_poses: args.poses == PoseSource::Truth,
+            ..SlamConfig::default()
+        },
+        fleet.setups.clone(),
+    );
+    let SimFleet {
+        sitl,
+        drones,
+        frames,
+        clock,
+        ..
+    } = fleet;
+    let runtime = Runtime::start(
+        RuntimeConfig {
+            strategy: args.strategy.strategy(),
+            timeout: Some(args.timeout),
+            auto_start: true,
+            exit_when_done: true,
+            ..RuntimeConfig::default()
+        },
+        drones,
+        slam,
+        frames,
+        clock.clone(),
+        recorder,
+    )?;
+    // Watch: progress, the true trajectories, and the fault if one was asked for.
+    let reachable = reachable_free(&world);
+    let wall = Instant::now();
+    let t0 = clock.now();
+    let mut truth_tracks: Vec<Vec<(f64, [f64; 4])>> = vec![vec![]; args.drones];
+    // Squared horizontal error of the flown pose, and samples, per drone.
+    let mut flight_error = vec![(0.0f64, 0usize); args.drones];
+    let mut next_progress = t0;
+    let mut next_truth = t0;
+    let mut killed = false;
+    while !runtime.finished() {
+        let now = clock.now();
+        if now >= next_truth {
+            next_truth += 0.1;
+            let s = runtime.snapshot();
+            for (k, p) in truth(&sitl).into_iter().enumerate() {
+                truth_tracks[k].push((now, p));
+                if let Some(e) = s
+                    .drones
+                    .get(k)
+                    .and_then(|d| d.pose.filter(|_| d.phase.flying()))
+                {
+                    flight_error[k].0 += (e[0] - p[0]).powi(2) + (e[1] - p[1]).powi(2);
+                    flight_error[k].1 += 1;
+                }
+            }
+        }
+        if let Some((k, at)) = kill
+            && !killed
+            && now - t0 >= at
+        {
+            eprintln!(
+                "explore: killing drone {}'s link at {:.0} s (--kill-link)",
+                k + 1,
+                now - t0
+            );
+            sitl.kill_endpoint(k);
+            killed = true;
+        }
+        if now >= next_progress {
+            next_progress += 5.0;
+            let s = runtime.snapshot();
+            let cov = s
+                .grid
+                .as_ref()
+                .map_or(0.0, |g| coverage(&reachable, &world, g));
+            let states: Vec<String> = s
+                .drones
+                .iter()
+                .map(|d| format!("{}: {}", d.id + 1, d.phase.name()))
+                .collect();
+            eprintln!(
+                "[{:6.1} s] coverage {:5.1} %  {}  {} keyframes, {} loops  ({:.1}× real time)",
+                now - t0,
+                cov * 100.0,
+                states.join(", "),
+                s.slam.stats.keyframes,
+                s.slam.stats.loop_closures,
+                (now - t0) / wall.elapsed().as_secs_f64().max(1e-3)
+            );
+        }
+        if now - t0 > args.timeout + 120.0 {
+            eprintln!("explore: drones still flying 120 s after the timeout; giving up");
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let last_snapshot = runtime.snapshot();
+    let report = runtime
+        .join()
+        .context("the mission loop stopped unexpectedly")?;
+    let collisions: Vec<u32> = sitl.with_sim(|sim| {
+        (0..sim.len())
+            .map(|k| sim.vehicle(k).state().collisions)
+            .collect()
+    });
+    let perception = report
+        .perception
+        .context("the SLAM thread stopped unexpectedly")?;
+    let voxels = perception.slam.map().snapshot();
+    let grid = voxels.project();
+    let stats = perception.slam.stats();
+    let completed = report.outcome == Some(Outcome::Completed);
+    let summary = Summary {
+        completed,
+        outcome: report.outcome.map_or("stopped", Outcome::name).into(),
+        exploration_time_s: report.mission_time_s,
+        coverage: grid
+            .as_ref()
+            .map_or(0.0, |g| coverage(&reachable, &world, g)),
+        wall_error: grid.as_ref().and_then(|g| wall_error(&world, g)),
+        collisions: collisions.iter().sum(),
+        all_landed: report.drones.iter().all(|d| d.phase == Phase::Landed),
+        world: world.name().into(),
+        link: args.link.name(),
+        strategy: args.strategy.name(),
+        pose_source: match args.poses {
+            PoseSource::Slam => "slam",
+            PoseSource::Truth => "ground truth",
+        },
+        loop_closures: stats.loop_closures,
+        keyframes: stats.keyframes,
+        drones: (0..args.drones)
+            .map(|k| {
+                let estimated = perception.slam.trajectory(k);
+                let score = |est: &[Stamped]| {
+                    (args.poses == PoseSource::Slam)
+                        .then(|| ate(&perception.truth[k], est, Alignment::Se3, 1e-3))
+                        .flatten()
+                        .map(|a| a.rmse_m)
+                };
+                DroneSummary {
+                    id: k + 1,
+                    path_length_m: path_length(&truth_tracks[k]),
+                    ate_rmse_m: score(&estimated),
+                    ate_online_rmse_m: score(&perception.online[k]),
+                    flight_pose_error_m: (flight_error[k].1 > 0)
+                        .then(|| (flight_error[k].0 / flight_error[k].1 as f64).sqrt()),
+                    lost_frames: perception.slam.estimate(k).map_or(0, |e| e.lost_frames),
+                    collisions: collisions[k],
+                    final_phase: report.drones[k].phase.name(),
+                }
+            })
+            .collect(),
+    };
+    let trajectories: Vec<(String, Vec<Stamped>, Vec<Stamped>)> = (0..args.drones)
+        .map(|k| {
+            (
+                format!("drone{}", k + 1),
+                perception.slam.trajectory(k),
+                perception.truth[k].clone(),
+            )
+        })
+        .collect();
+    write_outputs(
+        &args.out,
+        &voxels,
+        grid.as_ref(),
+        &truth_tracks,
+        &trajectories,
+        &summary,
+    )?;
+    if args.json {
+        println!("{}", serde_json::to_string(&summary)?);
+    } else {
+        println!(
+            "{} in {:.0} s simulated: coverage {:.1} %, walls within 0.1 m: {}, {} collision(s), {}; outputs in {}",
+            if summary.completed {
+                "explored"
+            } else {
+                "not finished"
+            },
+            summary.exploration_time_s,
+            summary.coverage * 100.0,
+            summary
+                .wall_error
+                .map_or("-".into(), |w| format!("{:.1} %", w.within_0_1_m * 100.0)),
+            summary.collisions,
+            if summary.all_landed {
+                "all landed"
+            } else {
+                "NOT all landed"
+            },
+            args.out.display()
+        );
+    }
+    if matches!(last_snapshot.state, MissionState::Exploring) {
+        tracing::warn!("the mission was still exploring when the run ended");
+    }
+    drop(sitl);
+    Ok(())
+}
+
+/// The simulator's true pose of every drone: x, y, z, yaw.
+fn truth(sitl: &sitl::Sitl) -> Vec<[f64; 4]> {
+    sitl.with_sim(|sim| {
+        (0..sim.len())
+            .map(|k| {
+                let s = sim.vehicle(k).state();
+                [s.position[0], s.position[1], s.position[2], s.yaw]
+            })
+            .collect()
+    })
+}
+
+fn path_length(track: &[(f64, [f64; 4])]) -> f64 {
+    track
+        .windows(2)
+        .map(|w| (w[1].1[0] - w[0].1[0]).hypot(w[1].1[1] - w[0].1[1]))
+        .sum()
+}
+
+/// Writes the map (PGM + YAML, PNG with the true trajectories), the 3D map (PLY), the camera
+/// trajectories (TUM, estimated and true) and `summary.json`.
+fn write_outputs(
+    out: &Path,
+    voxels: &slam::occupancy::VoxelMap,
+    grid: Option<&Grid>,
+    truth_tracks: &[Vec<(f64, [f64; 4])>],
+    trajectories: &[(String, Vec<Stamped>, Vec<Stamped>)],
+    summary: &Summary,
+) -> anyhow::Result<()> {
+    if let Some(g) = grid {
+        outputs::write_map(out, g)?;
+        let tracks: Vec<Vec<[f64; 2]>> = truth_tracks
+            .iter()
+            .map(|t| t.iter().map(|(_, p)| [p[0], p[1]]).collect())
+            .collect();
+        outputs::write_picture(&out.join("map.png"), g, &tracks)?;
+    }
+    outputs::write_ply(&out.join("map.ply"), voxels)?;
+    for (name, estimated, truth) in trajectories {
+        outputs::write_trajectory(&out.join(format!("{name}.tum")), estimated)?;
+        outputs::write_trajectory(&out.join(format!("{name}-truth.tum")), truth)?;
+    }
+    outputs::write_json(&out.join("summary.json"), summary)
+}

@@ -1,0 +1,257 @@
+//! Fleets: the simulated one (the simulator in-process, each vehicle on its own loopback socket
+//! and reached through the real link adapters, exactly as hardware would be) and, from a
+//! configuration file, real or external vehicles.
+
+use std::sync::Arc;
+use std::sync::mpsc::{Receiver, sync_channel};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use link::mavlink::{MavlinkConfig, MavlinkLink};
+use link::shield::{ShieldConfig, ShieldLink};
+use link::{LinkState, VehicleLink};
+use nalgebra::Isometry3;
+use sitl::{Camera, EndpointSpec, Protocol, SimConfig, Sitl, SitlConfig, World};
+use slam::system::RobotSetup;
+
+use crate::clock::{Clock, SimulatedClock};
+use crate::runtime::drone::{DroneSpec, StartSequence};
+use crate::runtime::perception::CameraFrame;
+
+/// The link protocol of the simulated fleet.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum LinkKind {
+    /// ArduCopter-like autopilots over MAVLink (TCP).
+    Mavlink,
+    /// The thesis's I/O shield in front of a Naza-like controller (TCP).
+    Shield,
+}
+
+impl LinkKind {
+    /// Lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            LinkKind::Mavlink => "mavlink",
+            LinkKind::Shield => "shield",
+        }
+    }
+}
+
+/// What to simulate.
+#[derive(Debug, Clone)]
+pub struct SimFleetConfig {
+    /// The building.
+    pub world: Arc<World>,
+    /// Number of drones.
+    pub drones: usize,
+    /// How the station talks to them.
+    pub link: LinkKind,
+    /// Simulated seconds per real second.
+    pub speed: f64,
+    /// Seed of the simulator's noise.
+    pub seed: u64,
+    /// Record each MAVLink vehicle's traffic to `droneK.tlog` here.
+    pub tlog_dir: Option<std::path::PathBuf>,
+}
+
+/// A simulated fleet, connected.
+pub struct SimFleet {
+    /// The simulator (ground truth for evaluation).
+    pub sitl: Sitl,
+    /// The drones for the runtime.
+    pub drones: Vec<DroneSpec>,
+    /// Their camera frames.
+    pub frames: Receiver<CameraFrame>,
+    /// The SLAM's robot setups.
+    pub setups: Vec<RobotSetup>,
+    /// The simulator's clock.
+    pub clock: Arc<dyn Clock>,
+}
+
+/// The altitude band of drone `k`: each its own, so paths may cross (thesis §3.3.3).
+pub fn altitude_band(k: usize) -> f64 {
+    0.9 + 0.15 * k as f64
+}
+
+/// The camera mounting of the simulated vehicles.
+pub fn sim_body_from_camera() -> Isometry3<f64> {
+    sitl::Vehicle::new(sitl::VehicleParams::default(), 0.0, 0.0, 0.0).map_from_camera()
+}
+
+impl SimFleet {
+    /// Starts the simulator and connects a link to every vehicle.
+    pub fn start(config: &SimFleetConfig) -> anyhow::Result<Self> {
+        let protocol = match config.link {
+            LinkKind::Mavlink => Protocol::Mavlink,
+            LinkKind::Shield => Protocol::Shield,
+        };
+        let vehicles: Vec<EndpointSpec> = (0..config.drones)
+            .map(|_| {
+                Ok(EndpointSpec {
+                    protocol,
+                    address: "tcpin:127.0.0.1:0".parse()?,
+                })
+            })
+            .collect::<anyhow::Result<_>>()?;
+        let sitl = Sitl::start(SitlConfig {
+            world: config.world.clone(),
+            sim: SimConfig {
+                seed: config.seed,
+                camera: Some(Camera::kinect(320, 240)),
+                camera_hz: 10.0,
+                ..SimConfig::default()
+            },
+            vehicles,
+            camera: None,
+            speed: config.speed,
+        })
+        .context("cannot start the simulator")?;
+        let clock: Arc<dyn Clock> = Arc::new(SimulatedClock {
+            clock: sitl.clock(),
+            speed: config.speed,
+        });
+        let starts: Vec<[f64; 3]> = sitl.with_sim(|sim| {
+            (0..sim.len())
+                .map(|k| {
+                    let s = sim.vehicle(k).state();
+                    [s.position[0], s.position[1], s.yaw]
+                })
+                .collect()
+        });
+        let mut drones = vec![];
+        for (k, addr) in sitl.endpoint_addrs().iter().enumerate() {
+            let port = addr
+                .context("vehicle endpoint has no local address")?
+                .port();
+            let tlog = config
+                .tlog_dir
+                .as_ref()
+                .map(|d| d.join(format!("drone{}.tlog", k + 1)));
+            let link = connect(
+                config.link,
+                &format!("tcpout:127.0.0.1:{port}"),
+                config.speed,
+                tlog.as_deref(),
+            )
+            .with_context(|| format!("drone {}", k + 1))?;
+            drones.push(DroneSpec {
+                name: format!("drone {}", k + 1),
+                link,
+                start_sequence: match config.link {
+                    LinkKind::Mavlink => StartSequence::Mavlink,
+                    LinkKind::Shield => StartSequence::Shield,
+                },
+                altitude: altitude_band(k),
+                start: Some(starts[k]),
+            });
+        }
+        let body_from_camera = sim_body_from_camera();
+        let setups = starts
+            .iter()
+            .map(|s| RobotSetup {
+                body_from_camera,
+                // The starts are known, as in the thesis (the SLAM can do without: see
+                // `slam::system`).
+                start: Some(Isometry3::new(
+                    nalgebra::Vector3::new(s[0], s[1], 0.0),
+                    nalgebra::Vector3::z() * s[2],
+                )),
+            })
+            .collect();
+        // Camera frames in-process, none dropped: when the station's SLAM falls behind, the
+        // simulation waits for it (the bounded queue passes the back-pressure on).
+        let (tx, frames) = sync_channel(4);
+        let source = sitl.subscribe_all();
+        std::thread::Builder::new()
+            .name("sim-cameras".into())
+            .spawn(move || {
+                for f in source {
+                    let frame = CameraFrame {
+                        drone: usize::from(f.frame.vehicle),
+                        stamp: f.frame.stamp.as_secs_f64(),
+                        frame: Arc::new(f.frame.clone()),
+                        truth: Some(f.map_from_camera),
+                    };
+                    if tx.send(frame).is_err() {
+                        return;
+                    }
+                }
+            })?;
+        Ok(Self {
+            sitl,
+            drones,
+            frames,
+            setups,
+            clock,
+        })
+    }
+
+    /// The simulator's true pose of every drone: x, y, z, yaw.
+    pub fn truth(&self) -> Vec<[f64; 4]> {
+        self.sitl.with_sim(|sim| {
+            (0..sim.len())
+                .map(|k| {
+                    let s = sim.vehicle(k).state();
+                    [s.position[0], s.position[1], s.position[2], s.yaw]
+                })
+                .collect()
+        })
+    }
+
+    /// Wall collisions of every drone so far.
+    pub fn collisions(&self) -> Vec<u32> {
+        self.sitl.with_sim(|sim| {
+            (0..sim.len())
+                .map(|k| sim.vehicle(k).state().collisions)
+                .collect()
+        })
+    }
+}
+
+/// Connects a link to one vehicle and waits until it is heard. Timeouts on simulated vehicles
+/// count simulated time, so the station's rates per simulated second stay as in real time.
+/// MAVLink traffic is recorded to `tlog` when given.
+pub fn connect(
+    kind: LinkKind,
+    address: &str,
+    speed: f64,
+    tlog: Option<&std::path::Path>,
+) -> anyhow::Result<Arc<dyn VehicleLink>> {
+    let address = address.parse()?;
+    let link: Arc<dyn VehicleLink> = match kind {
+        LinkKind::Mavlink => {
+            let link = MavlinkLink::connect(
+                &address,
+                MavlinkConfig {
+                    heartbeat_period: Duration::from_secs_f64(1.0 / speed),
+                    rc_rate_hz: (20.0 * speed).min(400.0),
+                    ..MavlinkConfig::default()
+                },
+            )?;
+            if let Some(path) = tlog {
+                link.record_to(path)
+                    .with_context(|| format!("cannot record to {}", path.display()))?;
+            }
+            let v = link
+                .wait_for_vehicle(Duration::from_secs(10))
+                .context("the vehicle never sent a heartbeat")?;
+            Arc::new(v)
+        }
+        LinkKind::Shield => Arc::new(ShieldLink::connect(
+            &address,
+            ShieldConfig {
+                rc_rate_hz: 50.0,
+                heartbeat_period: Duration::from_secs_f64((0.2 / speed).max(0.05)),
+                ..ShieldConfig::default()
+            },
+        )?),
+    };
+    let until = Instant::now() + Duration::from_secs(10);
+    while link.status().state != LinkState::Connected {
+        if Instant::now() > until {
+            bail!("the link never came up ({:?})", link.status());
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    Ok(link)
+}

@@ -1,0 +1,624 @@
+//! Everything the mission sees and does, recorded to MCAP with Foxglove's schemas so Foxglove
+//! opens the log as it is: camera frames (`foxglove.CompressedImage`, colour as JPEG, depth as
+//! 16-bit PNG in millimetres, with `foxglove.CameraCalibration`), every drone's telemetry, link
+//! state, RC sticks and phase (JSON), its pose (`foxglove.PoseInFrame`, and `foxglove.FrameTransform`
+//! on `/tf`), the 2D map (`foxglove.Grid`), the occupied voxels (`foxglove.PointCloud`), the
+//! planner's decisions (JSON) and the operator's commands (`foxglove.Log`).
+//!
+//! A writer thread takes records from a queue and closes a zstd chunk every second, so a crash
+//! loses at most the last second: the file reads back up to the last closed chunk.
+
+use std::collections::{BTreeMap, HashMap};
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use foxglove::Encode;
+use foxglove::messages::{
+    CameraCalibration, CompressedImage, FrameTransform, Grid as FoxGrid, Log, PackedElementField,
+    PointCloud, Pose, PoseInFrame, Quaternion, Timestamp, Vector2, Vector3,
+    packed_element_field::NumericType,
+};
+use link::camera::RgbdFrame;
+use link::{Sticks, Telemetry};
+use nav::grid::{Cell, Grid};
+use serde::{Deserialize, Serialize};
+
+/// What the log was recorded with, for replay: written once at the start on `/setup`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Setup {
+    /// Format version of the log.
+    pub version: u32,
+    /// The world, when simulated.
+    pub world: Option<String>,
+    /// Assignment strategy.
+    pub strategy: String,
+    /// The drones.
+    pub drones: Vec<SetupDrone>,
+}
+
+/// One drone in [`Setup`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SetupDrone {
+    /// Display name.
+    pub name: String,
+    /// Start in the map (x, y, yaw), when known.
+    pub start: Option<[f64; 3]>,
+    /// The camera on the body: x, y, z, qx, qy, qz, qw.
+    pub body_from_camera: [f64; 7],
+    /// Altitude band, metres.
+    pub altitude: f64,
+}
+
+/// The state of one drone at one control tick, as written on `/droneK/state`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DroneState {
+    /// Mission clock, seconds.
+    pub t: f64,
+    /// Phase name.
+    pub phase: String,
+    /// Height from the rangefinder, metres.
+    pub height_m: Option<f32>,
+    /// IMU heading, radians.
+    pub yaw_rad: Option<f32>,
+    /// Roll, pitch, yaw from the flight controller, radians.
+    pub attitude: Option<[f32; 3]>,
+    /// Battery voltage, volts.
+    pub battery_v: Option<f32>,
+    /// Battery charge, percent.
+    pub battery_pct: Option<u8>,
+    /// Armed as the vehicle says.
+    pub armed: Option<bool>,
+    /// Flight mode as the vehicle says.
+    pub mode: Option<String>,
+    /// Sticks sent (roll, pitch, yaw, throttle), −1…1.
+    pub sticks: Option<[f32; 4]>,
+    /// The filter's pose (x, y, z, yaw), if valid.
+    pub pose: Option<[f64; 4]>,
+}
+
+/// One thing to record.
+#[derive(Debug, Clone)]
+pub enum Record {
+    /// The setup (first).
+    Setup(Setup),
+    /// A camera frame of a drone.
+    Camera {
+        /// Mission clock, seconds.
+        t: f64,
+        /// The drone.
+        drone: usize,
+        /// The frame.
+        frame: Arc<RgbdFrame>,
+    },
+    /// A drone's control tick.
+    Drone {
+        /// Mission clock, seconds.
+        t: f64,
+        /// The drone.
+        drone: usize,
+        /// Its telemetry.
+        telemetry: Telemetry,
+        /// Sticks sent.
+        sticks: Option<Sticks>,
+        /// The filter's pose.
+        pose: Option<[f64; 4]>,
+        /// Its phase.
+        phase: &'static str,
+    },
+    /// The 2D map.
+    Grid {
+        /// Mission clock, seconds.
+        t: f64,
+        /// The map.
+        grid: Arc<Grid>,
+    },
+    /// Occupied voxel centres (x, y, z).
+    Cloud {
+        /// Mission clock, seconds.
+        t: f64,
+        /// The points, metres.
+        points: Vec<[f64; 3]>,
+    },
+    /// A planner decision.
+    Plan {
+        /// Mission clock, seconds.
+        t: f64,
+        /// Per exploring drone, its goal.
+        goals: Vec<(usize, Option<[f64; 2]>)>,
+        /// The frontiers' goal points.
+        frontiers: Vec<[f64; 2]>,
+    },
+    /// An operator command.
+    Operator {
+        /// Mission clock, seconds.
+        t: f64,
+        /// The command.
+        command: String,
+    },
+}
+
+enum Message {
+    Record(Record),
+    Finish,
+}
+
+/// Counters of a recording.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct RecordStats {
+    /// Messages written.
+    pub messages: u64,
+    /// Records dropped because the writer fell behind.
+    pub dropped: u64,
+    /// Bytes in the file when it was closed.
+    pub bytes: u64,
+}
+
+struct Inner {
+    path: PathBuf,
+    thread: Mutex<Option<JoinHandle<Result<RecordStats, String>>>>,
+    dropped: AtomicU64,
+    result: Mutex<Option<Result<RecordStats, String>>>,
+}
+
+/// A recording in progress; clones share it.
+#[derive(Clone)]
+pub struct Recorder {
+    tx: SyncSender<Message>,
+    inner: Arc<Inner>,
+}
+
+impl std::fmt::Debug for Recorder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Recorder({})", self.inner.path.display())
+    }
+}
+
+impl Recorder {
+    /// Creates the file and starts the writer.
+    pub fn create(path: &Path) -> anyhow::Result<Self> {
+        let file = File::create(path)
+            .map_err(|e| anyhow::anyhow!("cannot create the log {}: {e}", path.display()))?;
+        let writer = mcap::WriteOptions::new()
+            .compression(Some(mcap::Compression::Zstd))
+            .profile("")
+            .library(concat!("gcs ", env!("CARGO_PKG_VERSION")))
+            .create(BufWriter::new(file))
+            .map_err(|e| anyhow::anyhow!("cannot start the log {}: {e}", path.display()))?;
+        // Room for a few seconds of everything; a writer further behind drops records.
+        let (tx, rx) = sync_channel(512);
+        let thread = std::thread::Builder::new()
+            .name("recorder".into())
+            .spawn(move || write_all(writer, &rx))?;
+        Ok(Self {
+            tx,
+            inner: Arc::new(Inner {
+                path: path.to_owned(),
+                thread: Mutex::new(Some(thread)),
+                dropped: AtomicU64::new(0),
+                result: Mutex::new(None),
+            }),
+        })
+    }
+
+    /// The file.
+    pub fn path(&self) -> &Path {
+        &self.inner.path
+    }
+
+    /// Queues a record (never blocks: when the writer is far behind, the record is dropped and
+    /// counted).
+    pub fn send(&self, record: Record) {
+        if let Err(TrySendError::Full(_)) = self.tx.try_send(Message::Record(record)) {
+            self.inner.dropped.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    /// Writes what is queued, closes the file and returns the counters (the first caller does
+    /// the work; later callers get the same result).
+    pub fn finish(&mut self) -> Result<RecordStats, String> {
+        let thread = self
+            .inner
+            .thread
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .take();
+        let mut result = self
+            .inner
+            .result
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner);
+        if let Some(t) = thread {
+            let _ = self.tx.send(Message::Finish);
+            let r = t
+                .join()
+                .unwrap_or_else(|_| Err("the recorder thread panicked".into()))
+                .map(|s| RecordStats {
+                    dropped: self.inner.dropped.load(Ordering::Relaxed),
+                    bytes: std::fs::metadata(&self.inner.path).map_or(0, |m| m.len()),
+                    ..s
+                });
+            *result = Some(r);
+        }
+        result
+            .clone()
+            .unwrap_or_else(|| Err("the recording never started".into()))
+    }
+}
+
+/// The writer's channels by topic.
+struct Channels {
+    schemas: HashMap<String, u16>,
+    topics: HashMap<String, u16>,
+    sequence: u32,
+}
+
+type McapWriter = mcap::Writer<BufWriter<File>>;
+
+impl Channels {
+    /// The channel of `topic` with a Foxglove message type.
+    fn foxglove<T: Encode>(&mut self, w: &mut McapWriter, topic: &str) -> Result<u16, String> {
+        if let Some(&c) = self.topics.get(topic) {
+            return Ok(c);
+        }
+        let schema = T::get_schema().ok_or("a Foxglove type without a schema")?;
+        let schema_id = match self.schemas.get(&schema.name) {
+            Some(&s) => s,
+            None => {
+                let s = w
+                    .add_schema(&schema.name, &schema.encoding, &schema.data)
+                    .map_err(|e| e.to_string())?;
+                self.schemas.insert(schema.name.clone(), s);
+                s
+            }
+        };
+        let c = w
+            .add_channel(
+                schema_id,
+                topic,
+                &T::get_message_encoding(),
+                &BTreeMap::new(),
+            )
+            .map_err(|e| e.to_string())?;
+        self.topics.insert(topic.to_owned(), c);
+        Ok(c)
+    }
+
+    /// The channel of `topic` carrying JSON of the named schema.
+    fn json(&mut self, w: &mut McapWriter, topic: &str, name: &str) -> Result<u16, String> {
+        if let Some(&c) = self.topics.get(topic) {
+            return Ok(c);
+        }
+        let schema_id = match self.schemas.get(name) {
+            Some(&s) => s,
+            None => {
+                let s = w
+                    .add_schema(name, "jsonschema", br#"{"type":"object"}"#)
+                    .map_err(|e| e.to_string())?;
+                self.schemas.insert(name.to_owned(), s);
+                s
+            }
+        };
+        let c = w
+            .add_channel(schema_id, topic, "json", &BTreeMap::new())
+            .map_err(|e| e.to_string())?;
+        self.topics.insert(topic.to_owned(), c);
+        Ok(c)
+    }
+
+    fn write(
+        &mut self,
+        w: &mut McapWriter,
+        channel: u16,
+        t: f64,
+        data: &[u8],
+    ) -> Result<(), String> {
+        self.sequence = self.sequence.wrapping_add(1);
+        let ns = (t.max(0.0) * 1e9) as u64;
+        w.write_to_known_channel(
+            &mcap::records::MessageHeader {
+                channel_id: channel,
+                sequence: self.sequence,
+                log_time: ns,
+                publish_time: ns,
+            },
+            data,
+        )
+        .map_err(|e| e.to_string())
+    }
+}
+
+fn encode<T: Encode>(m: &T) -> Result<Vec<u8>, String> {
+    let mut buf = Vec::with_capacity(m.encoded_len().unwrap_or(256));
+    m.encode(&mut buf).map_err(|e| e.to_string())?;
+    Ok(buf)
+}
+
+fn stamp(t: f64) -> Option<Timestamp> {
+    let t = t.max(0.0);
+    Some(Timestamp::new(t.trunc() as u32, (t.fract() * 1e9) as u32))
+}
+
+fn quaternion_of_yaw(yaw: f64) -> Quaternion {
+    let (s, c) = (yaw / 2.0).sin_cos();
+    Quaternion {
+        x: 0.0,
+        y: 0.0,
+        z: s,
+        w: c,
+    }
+}
+
+fn write_all(mut w: McapWriter, rx: &Receiver<Message>) -> Result<RecordStats, String> {
+    let mut channels = Channels {
+        schemas: HashMap::new(),
+        topics: HashMap::new(),
+        sequence: 0,
+    };
+    let mut stats = RecordStats::default();
+    let mut last_flush = Instant::now();
+    let mut first_error: Option<String> = None;
+    loop {
+        let message = rx.recv_timeout(Duration::from_millis(200));
+        match message {
+            Ok(Message::Record(r)) => match write_record(&mut w, &mut channels, &r) {
+                Ok(n) => stats.messages += n,
+                Err(e) => {
+                    if first_error.is_none() {
+                        tracing::error!("recording: {e}");
+                    }
+                    first_error.get_or_insert(e);
+                }
+            },
+            Ok(Message::Finish) | Err(RecvTimeoutError::Disconnected) => break,
+            Err(RecvTimeoutError::Timeout) => {}
+        }
+        // Close the chunk once a second: a crash loses at most that.
+        if last_flush.elapsed() >= Duration::from_secs(1) {
+            w.flush().map_err(|e| e.to_string())?;
+            last_flush = Instant::now();
+        }
+    }
+    w.finish().map_err(|e| e.to_string())?;
+    match first_error {
+        Some(e) => Err(e),
+        None => Ok(stats),
+    }
+}
+
+/// Writes one record; returns the number of messages.
+fn write_record(w: &mut McapWriter, ch: &mut Channels, r: &Record) -> Result<u64, String> {
+    match r {
+        Record::Setup(setup) => {
+            let c = ch.json(w, "/setup", "gcs.Setup")?;
+            let data = serde_json::to_vec(setup).map_err(|e| e.to_string())?;
+            ch.write(w, c, 0.0, &data)?;
+            Ok(1)
+        }
+        Record::Camera { t, drone, frame } => {
+            let k = drone + 1;
+            let frame_id = format!("drone{k}_camera");
+            let colour = image::RgbImage::from_raw(frame.width, frame.height, frame.rgb.clone())
+                .ok_or("camera frame of the wrong size")?;
+            let mut jpeg = vec![];
+            image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, 90)
+                .encode_image(&colour)
+                .map_err(|e| e.to_string())?;
+            let depth = image::ImageBuffer::<image::Luma<u16>, _>::from_raw(
+                frame.width,
+                frame.height,
+                frame.depth_mm.clone(),
+            )
+            .ok_or("depth image of the wrong size")?;
+            let mut png = vec![];
+            depth
+                .write_with_encoder(image::codecs::png::PngEncoder::new_with_quality(
+                    &mut png,
+                    image::codecs::png::CompressionType::Fast,
+                    image::codecs::png::FilterType::Sub,
+                ))
+                .map_err(|e| e.to_string())?;
+            for (topic, data, format) in [
+                (format!("/drone{k}/camera/color"), jpeg, "jpeg"),
+                (format!("/drone{k}/camera/depth"), png, "png"),
+            ] {
+                let c = ch.foxglove::<CompressedImage>(w, &topic)?;
+                let m = CompressedImage {
+                    timestamp: stamp(*t),
+                    frame_id: frame_id.clone(),
+                    data: data.into(),
+                    format: format.into(),
+                };
+                ch.write(w, c, *t, &encode(&m)?)?;
+            }
+            let i = frame.intrinsics;
+            let (fx, fy, cx, cy) = (
+                f64::from(i.fx),
+                f64::from(i.fy),
+                f64::from(i.cx),
+                f64::from(i.cy),
+            );
+            let c =
+                ch.foxglove::<CameraCalibration>(w, &format!("/drone{k}/camera/calibration"))?;
+            let m = CameraCalibration {
+                timestamp: stamp(*t),
+                frame_id,
+                width: frame.width,
+                height: frame.height,
+                distortion_model: "plumb_bob".into(),
+                d: vec![0.0; 5],
+                k: vec![fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0],
+                r: vec![1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+                p: vec![fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0],
+            };
+            ch.write(w, c, *t, &encode(&m)?)?;
+            Ok(3)
+        }
+        Record::Drone {
+            t,
+            drone,
+            telemetry,
+            sticks,
+            pose,
+            phase,
+        } => {
+            let k = drone + 1;
+            let state = DroneState {
+                t: *t,
+                phase: (*phase).into(),
+                height_m: telemetry.height_m,
+                yaw_rad: telemetry.yaw_rad,
+                attitude: telemetry.attitude.map(|a| [a.roll, a.pitch, a.yaw]),
+                battery_v: telemetry.battery.map(|b| b.voltage_v),
+                battery_pct: telemetry.battery.and_then(|b| b.remaining_pct),
+                armed: telemetry.armed,
+                mode: telemetry.mode.clone(),
+                sticks: sticks.map(|s| [s.roll, s.pitch, s.yaw, s.throttle]),
+                pose: *pose,
+            };
+            let c = ch.json(w, &format!("/drone{k}/state"), "gcs.DroneState")?;
+            ch.write(
+                w,
+                c,
+                *t,
+                &serde_json::to_vec(&state).map_err(|e| e.to_string())?,
+            )?;
+            let Some(p) = pose else {
+                return Ok(1);
+            };
+            let position = Some(Vector3 {
+                x: p[0],
+                y: p[1],
+                z: p[2],
+            });
+            let c = ch.foxglove::<PoseInFrame>(w, &format!("/drone{k}/pose"))?;
+            let m = PoseInFrame {
+                timestamp: stamp(*t),
+                frame_id: "map".into(),
+                pose: Some(Pose {
+                    position,
+                    orientation: Some(quaternion_of_yaw(p[3])),
+                }),
+            };
+            ch.write(w, c, *t, &encode(&m)?)?;
+            let c = ch.foxglove::<FrameTransform>(w, "/tf")?;
+            let m = FrameTransform {
+                timestamp: stamp(*t),
+                parent_frame_id: "map".into(),
+                child_frame_id: format!("drone{k}"),
+                translation: position,
+                rotation: Some(quaternion_of_yaw(p[3])),
+            };
+            ch.write(w, c, *t, &encode(&m)?)?;
+            Ok(3)
+        }
+        Record::Grid { t, grid } => {
+            let c = ch.foxglove::<FoxGrid>(w, "/map")?;
+            // ROS occupancy values: 0 free, 100 occupied, −1 unknown.
+            let data: Vec<u8> = (0..grid.height())
+                .flat_map(|y| (0..grid.width()).map(move |x| (x, y)))
+                .map(|c| match grid.get(c) {
+                    Cell::Free => 0u8,
+                    Cell::Occupied => 100,
+                    Cell::Unknown => (-1i8) as u8,
+                })
+                .collect();
+            let o = grid.origin();
+            let m = FoxGrid {
+                timestamp: stamp(*t),
+                frame_id: "map".into(),
+                pose: Some(Pose {
+                    position: Some(Vector3 {
+                        x: o[0],
+                        y: o[1],
+                        z: 0.0,
+                    }),
+                    orientation: Some(quaternion_of_yaw(0.0)),
+                }),
+                column_count: grid.width() as u32,
+                cell_size: Some(Vector2 {
+                    x: grid.resolution(),
+                    y: grid.resolution(),
+                }),
+                row_stride: grid.width() as u32,
+                cell_stride: 1,
+                fields: vec![PackedElementField {
+                    name: "occupancy".into(),
+                    offset: 0,
+                    r#type: NumericType::Int8 as i32,
+                }],
+                data: data.into(),
+            };
+            ch.write(w, c, *t, &encode(&m)?)?;
+            Ok(1)
+        }
+        Record::Cloud { t, points } => {
+            let c = ch.foxglove::<PointCloud>(w, "/map/points")?;
+            let mut data = Vec::with_capacity(points.len() * 12);
+            for p in points {
+                for v in p {
+                    data.extend_from_slice(&(*v as f32).to_le_bytes());
+                }
+            }
+            let field = |name: &str, offset| PackedElementField {
+                name: name.into(),
+                offset,
+                r#type: NumericType::Float32 as i32,
+            };
+            let m = PointCloud {
+                timestamp: stamp(*t),
+                frame_id: "map".into(),
+                pose: Some(Pose {
+                    position: Some(Vector3 {
+                        x: 0.0,
+                        y: 0.0,
+                        z: 0.0,
+                    }),
+                    orientation: Some(quaternion_of_yaw(0.0)),
+                }),
+                point_stride: 12,
+                fields: vec![field("x", 0), field("y", 4), field("z", 8)],
+                data: data.into(),
+            };
+            ch.write(w, c, *t, &encode(&m)?)?;
+            Ok(1)
+        }
+        Record::Plan {
+            t,
+            goals,
+            frontiers,
+        } => {
+            let c = ch.json(w, "/plan", "gcs.Plan")?;
+            let v = serde_json::json!({
+                "t": t,
+                "goals": goals.iter().map(|(k, g)| serde_json::json!({"drone": k + 1, "goal": g})).collect::<Vec<_>>(),
+                "frontiers": frontiers,
+            });
+            ch.write(
+                w,
+                c,
+                *t,
+                &serde_json::to_vec(&v).map_err(|e| e.to_string())?,
+            )?;
+            Ok(1)
+        }
+        Record::Operator { t, command } => {
+            let c = ch.foxglove::<Log>(w, "/operator")?;
+            let m = Log {
+                timestamp: stamp(*t),
+                level: 2,
+                message: command.clone(),
+                name: "operator".into(),
+                file: String::new(),
+                line: 0,
+            };
+            ch.write(w, c, *t, &encode(&m)?)?;
+            Ok(1)
+        }
+    }
+}

@@ -1,0 +1,679 @@
+//! One drone in the mission: its link, its pose filter, what it is doing, and the control loop
+//! that turns a goal into sticks (thesis §4.4: height PI, yaw P, x/y position from the filter —
+//! the position hold the thesis lacked).
+
+use std::sync::Arc;
+use std::sync::mpsc::{Receiver, TryRecvError, channel};
+
+use link::{Command, CommandError, FlightMode, LinkState, Sticks, VehicleLink};
+use nav::control::{PidGains, Pose3, PositionController, PositionGains};
+use nav::local::{Follow, FollowerConfig, PathFollower, Pose2};
+use slam::ekf::{Ekf, EkfConfig, Input};
+
+/// What a drone is doing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Phase {
+    /// On the ground, waiting for the mission.
+    Idle,
+    /// Arming and starting its motors.
+    Arming,
+    /// Climbing to its altitude band.
+    TakingOff,
+    /// Flying to frontiers.
+    Exploring,
+    /// Holding a position and the operator's goal height and yaw.
+    Holding,
+    /// Flying back to its start to land there (low battery, or the operator).
+    Returning,
+    /// Landing where it is.
+    Landing,
+    /// On the ground, disarmed.
+    Landed,
+    /// The link is lost: the vehicle's own failsafe lands it.
+    LinkLost,
+}
+
+impl Phase {
+    /// Lower-case name for displays and JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            Phase::Idle => "idle",
+            Phase::Arming => "arming",
+            Phase::TakingOff => "taking off",
+            Phase::Exploring => "exploring",
+            Phase::Holding => "holding",
+            Phase::Returning => "returning",
+            Phase::Landing => "landing",
+            Phase::Landed => "landed",
+            Phase::LinkLost => "link lost",
+        }
+    }
+
+    /// Whether the drone is (or may be) in the air under the station's control.
+    pub fn flying(self) -> bool {
+        matches!(
+            self,
+            Phase::TakingOff | Phase::Exploring | Phase::Holding | Phase::Returning
+        )
+    }
+}
+
+/// How the station starts a vehicle.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StartSequence {
+    /// A MAVLink autopilot: ALT_HOLD, throttle low, arm.
+    Mavlink,
+    /// The thesis's shield: arm the outputs, then the Naza's start-motors stick combination.
+    Shield,
+}
+
+/// One vehicle of the fleet as the mission runtime gets it.
+pub struct DroneSpec {
+    /// A name for displays ("drone 1").
+    pub name: String,
+    /// The connected link.
+    pub link: Arc<dyn VehicleLink>,
+    /// How to start it.
+    pub start_sequence: StartSequence,
+    /// Its altitude band, metres above the floor.
+    pub altitude: f64,
+    /// Where it starts in the map (x, y, yaw), when known.
+    pub start: Option<[f64; 3]>,
+}
+
+/// Timing and behaviour settings of every drone.
+#[derive(Debug, Clone)]
+pub struct DroneConfig {
+    /// Position controller gains.
+    pub gains: PositionGains,
+    /// Path follower.
+    pub follower: FollowerConfig,
+    /// Pose filter.
+    pub ekf: EkfConfig,
+    /// Seconds without 0.3 m of progress toward a goal before it is given up.
+    pub stuck_s: f64,
+    /// A look around on the spot takes this long, seconds.
+    pub scan_s: f64,
+    /// Yaw stick while hovering without a pose (a slow turn so the camera finds known views).
+    pub blind_yaw: f32,
+    /// Land after this long without a valid pose, seconds.
+    pub blind_land_s: f64,
+    /// Return to the start and land below this battery charge, percent.
+    pub low_battery_pct: u8,
+    /// A goal reached within this distance, metres (returning home).
+    pub home_reach_m: f64,
+}
+
+impl Default for DroneConfig {
+    fn default() -> Self {
+        let xy = PidGains {
+            kp: 0.3,
+            ki: 0.02,
+            kd: 0.6,
+            output_limit: 0.5,
+            integral_limit: 0.3,
+        };
+        Self {
+            gains: PositionGains {
+                x: xy,
+                y: xy,
+                z: PidGains {
+                    kp: 1.0,
+                    ki: 0.05,
+                    kd: 0.0,
+                    output_limit: 1.0,
+                    integral_limit: 0.3,
+                },
+                // At most 36°/s of turn: the camera must keep enough overlap between frames.
+                yaw: PidGains {
+                    output_limit: 0.4,
+                    ..PidGains::p(1.5)
+                },
+            },
+            follower: FollowerConfig {
+                lookahead_m: 0.4,
+                ..FollowerConfig::default()
+            },
+            ekf: EkfConfig::default(),
+            stuck_s: 15.0,
+            scan_s: 10.0,
+            blind_yaw: 0.2,
+            blind_land_s: 30.0,
+            low_battery_pct: 25,
+            home_reach_m: 0.3,
+        }
+    }
+}
+
+/// A look around on the spot.
+#[derive(Debug, Clone, Copy)]
+struct Scan {
+    since: f64,
+    yaw0: f64,
+    /// The goal to give up after it (reached while its frontier stayed).
+    give_up: Option<[f64; 2]>,
+}
+
+/// A drone in the mission.
+pub struct Drone {
+    /// Index in the fleet.
+    pub id: usize,
+    /// Display name.
+    pub name: String,
+    /// The link.
+    pub link: Arc<dyn VehicleLink>,
+    start_sequence: StartSequence,
+    /// Its altitude band, metres.
+    pub altitude: f64,
+    /// Where it started (x, y, yaw), if known.
+    pub start: Option<[f64; 3]>,
+    /// What it is doing.
+    pub phase: Phase,
+    /// The pose filter.
+    pub ekf: Ekf,
+    follower: PathFollower,
+    controller: PositionController,
+    /// The frontier (or home) it flies to.
+    pub goal: Option<[f64; 2]>,
+    progress: (f64, [f64; 2]),
+    scan: Option<Scan>,
+    hold: [f64; 2],
+    /// Heading held, radians.
+    pub yaw_goal: f64,
+    /// Height held, metres.
+    pub height_goal: f64,
+    /// A command running on its own thread (commands wait for the vehicle's answer).
+    pending: Option<(Command, Receiver<Result<(), CommandError>>)>,
+    /// The phase the link was lost in.
+    lost_in: Option<Phase>,
+    blind_since: Option<f64>,
+    last_tick: Option<f64>,
+    /// The sticks sent last.
+    pub sticks: Option<Sticks>,
+    /// The filter's path: (time, x, y, z, yaw).
+    pub trajectory: Vec<(f64, [f64; 4])>,
+    /// Distance flown according to the filter, metres.
+    pub path_length: f64,
+    /// Messages for the operator since the last call of [`Drone::take_messages`].
+    messages: Vec<String>,
+}
+
+/// Something the drone's tick wants the mission to know.
+#[derive(Debug, Clone, PartialEq)]
+pub enum DroneEvent {
+    /// Give this frontier goal up for good (reached while its frontier stayed, or no progress).
+    GiveUp([f64; 2]),
+}
+
+impl Drone {
+    /// A drone on the ground at mission time `t`.
+    pub fn new(id: usize, spec: DroneSpec, config: &DroneConfig, t: f64) -> Self {
+        let [x, y, yaw] = spec.start.unwrap_or([0.0, 0.0, 0.0]);
+        let mut ekf = Ekf::new(config.ekf.clone(), t, [x, y, 0.0], yaw);
+        if spec.start.is_some() {
+            // A known start is a fix.
+            ekf.update_slam(t, [x, y, 0.0], yaw);
+        }
+        Self {
+            id,
+            name: spec.name,
+            link: spec.link,
+            start_sequence: spec.start_sequence,
+            altitude: spec.altitude,
+            start: spec.start,
+            phase: Phase::Idle,
+            ekf,
+            follower: PathFollower::new(config.follower.clone()),
+            controller: PositionController::new(config.gains),
+            goal: None,
+            progress: (t, [x, y]),
+            scan: None,
+            hold: [x, y],
+            yaw_goal: yaw,
+            height_goal: spec.altitude,
+            pending: None,
+            lost_in: None,
+            blind_since: None,
+            last_tick: None,
+            sticks: None,
+            trajectory: vec![],
+            path_length: 0.0,
+            messages: vec![],
+        }
+    }
+
+    /// The path it is following.
+    pub fn path(&self) -> &[[f64; 2]] {
+        self.follower.path()
+    }
+
+    /// Takes the operator messages produced since the last call.
+    pub fn take_messages(&mut self) -> Vec<String> {
+        std::mem::take(&mut self.messages)
+    }
+
+    fn say(&mut self, text: String) {
+        tracing::info!(drone = self.id + 1, "{text}");
+        self.messages.push(text);
+    }
+
+    /// Sends a command on its own thread; its answer is read by later ticks.
+    fn send(&mut self, command: Command) {
+        let (tx, rx) = channel();
+        let link = self.link.clone();
+        let spawned = std::thread::Builder::new()
+            .name(format!("command-{}", self.id + 1))
+            .spawn(move || {
+                let _ = tx.send(link.command(command));
+            });
+        match spawned {
+            Ok(_) => self.pending = Some((command, rx)),
+            Err(e) => self.say(format!("cannot send {command}: {e}")),
+        }
+    }
+
+    /// The answer to the pending command, once it came.
+    fn answer(&mut self) -> Option<(Command, Result<(), CommandError>)> {
+        let (command, rx) = self.pending.as_ref()?;
+        let command = *command;
+        match rx.try_recv() {
+            Ok(r) => {
+                self.pending = None;
+                Some((command, r))
+            }
+            Err(TryRecvError::Empty) => None,
+            Err(TryRecvError::Disconnected) => {
+                self.pending = None;
+                Some((command, Err(CommandError::Closed { command })))
+            }
+        }
+    }
+
+    /// Starts arming (the mission's start, or the operator's take-off).
+    pub fn take_off(&mut self) {
+        if !matches!(self.phase, Phase::Idle | Phase::Landed) {
+            return;
+        }
+        self.phase = Phase::Arming;
+        match self.start_sequence {
+            StartSequence::Mavlink => {
+                self.link.set_sticks(Some(Sticks {
+                    throttle: -1.0,
+                    ..Sticks::CENTRED
+                }));
+                self.send(Command::SetMode(FlightMode::AltHold));
+            }
+            StartSequence::Shield => self.send(Command::Arm),
+        }
+    }
+
+    /// Lands where it is (the vehicle lands and disarms by itself).
+    pub fn land(&mut self) {
+        if matches!(self.phase, Phase::Landed | Phase::Landing | Phase::Idle) {
+            return;
+        }
+        self.set_sticks(Sticks::CENTRED);
+        self.follower.set_path(vec![]);
+        self.goal = None;
+        self.phase = Phase::Landing;
+        self.send(Command::Land);
+    }
+
+    /// Flies home and lands there (or lands where it is if its start is unknown).
+    pub fn return_home(&mut self, why: &str) {
+        if !self.phase.flying() || self.phase == Phase::Returning {
+            return;
+        }
+        match self.start {
+            Some([x, y, _]) => {
+                self.say(format!("{why}: returning to its start"));
+                self.phase = Phase::Returning;
+                self.goal = Some([x, y]);
+                self.follower.set_path(vec![]);
+                self.scan = None;
+            }
+            None => {
+                self.say(format!("{why}: landing (its start is unknown)"));
+                self.land();
+            }
+        }
+    }
+
+    /// Holds position with the operator's goal height and yaw (the thesis's control-test tab).
+    pub fn hold(&mut self, height: f64, yaw: f64) {
+        if !self.phase.flying() {
+            return;
+        }
+        let e = self.ekf.estimate();
+        self.hold = [e.position[0], e.position[1]];
+        self.height_goal = height;
+        self.yaw_goal = yaw;
+        self.follower.set_path(vec![]);
+        self.goal = None;
+        self.scan = None;
+        self.phase = Phase::Holding;
+    }
+
+    /// Back to exploring from a hold.
+    pub fn resume(&mut self) {
+        if self.phase == Phase::Holding {
+            self.height_goal = self.altitude;
+            self.phase = Phase::Exploring;
+        }
+    }
+
+    /// Disarms (refused by the caller unless on the ground).
+    pub fn disarm(&mut self) {
+        self.link.set_sticks(None);
+        self.send(Command::Disarm);
+    }
+
+    /// A new frontier goal and path from the mission planner (exploring drones only).
+    pub fn set_plan(&mut self, goal: Option<[f64; 2]>, path: Vec<[f64; 2]>, now: f64) {
+        if self.phase != Phase::Exploring || self.scan.is_some() {
+            return;
+        }
+        if goal != self.goal {
+            let e = self.ekf.estimate();
+            self.progress = (now, [e.position[0], e.position[1]]);
+        }
+        self.goal = goal;
+        self.follower.set_path(path);
+    }
+
+    /// A path home (returning drones only).
+    pub fn set_home_path(&mut self, path: Vec<[f64; 2]>) {
+        if self.phase == Phase::Returning {
+            self.follower.set_path(path);
+        }
+    }
+
+    fn set_sticks(&mut self, s: Sticks) {
+        self.link.set_sticks(Some(s));
+        self.ekf.set_input(Input {
+            roll: f64::from(s.roll),
+            pitch: f64::from(s.pitch),
+            yaw: f64::from(s.yaw),
+            throttle: f64::from(s.throttle),
+        });
+        self.sticks = Some(s);
+    }
+
+    /// The filter's pose (x, y, z, yaw) if valid.
+    pub fn pose(&self) -> Option<[f64; 4]> {
+        self.ekf
+            .valid_estimate()
+            .map(|e| [e.position[0], e.position[1], e.position[2], e.attitude[2]])
+    }
+
+    /// One control tick at mission time `now`.
+    pub fn tick(&mut self, now: f64, config: &DroneConfig) -> Option<DroneEvent> {
+        let dt = self.last_tick.map_or(0.1, |t| (now - t).clamp(0.01, 1.0));
+        self.last_tick = Some(now);
+        let telemetry = self.link.telemetry();
+        // The filter: predict to now, then what the vehicle measured.
+        self.ekf.predict(now);
+        if let Some(yaw) = telemetry.yaw_rad {
+            self.ekf.update_heading(now, f64::from(yaw));
+        }
+        if let Some(a) = telemetry.attitude {
+            self.ekf
+                .update_attitude(now, f64::from(a.roll), f64::from(a.pitch));
+        }
+        let on_ground = matches!(self.phase, Phase::Idle | Phase::Arming | Phase::Landed)
+            || telemetry.armed == Some(false);
+        if let Some(h) = telemetry.height_m {
+            self.ekf.update_height(now, f64::from(h));
+        }
+        if on_ground {
+            self.ekf.set_input(Input::default());
+        }
+        if let Some(p) = self.pose() {
+            if let Some((_, last)) = self.trajectory.last() {
+                self.path_length += (p[0] - last[0]).hypot(p[1] - last[1]);
+            }
+            self.trajectory.push((now, p));
+        }
+        // The link.
+        let status = self.link.status();
+        if status.state == LinkState::Lost && self.phase != Phase::Landed {
+            if self.phase != Phase::LinkLost {
+                self.say(
+                    "link lost: its goal goes to the others; the vehicle's failsafe lands it"
+                        .into(),
+                );
+                self.lost_in = Some(self.phase);
+                self.phase = Phase::LinkLost;
+                self.goal = None;
+                self.follower.set_path(vec![]);
+            }
+            return None;
+        }
+        if self.phase == Phase::LinkLost {
+            let before = self.lost_in.take().unwrap_or(Phase::Exploring);
+            let flying = telemetry.armed == Some(true) && telemetry.mode.as_deref() != Some("LAND");
+            self.phase = if flying && before.flying() {
+                self.say("link back: resuming".into());
+                Phase::Exploring
+            } else if telemetry.armed == Some(true) {
+                self.say("link back: the vehicle is landing by its failsafe".into());
+                Phase::Landing
+            } else {
+                self.say("link back: the vehicle is on the ground".into());
+                Phase::Landed
+            };
+        }
+        // Commands in flight.
+        if let Some((command, result)) = self.answer() {
+            self.on_answer(command, result);
+        }
+        match self.phase {
+            Phase::Idle | Phase::Landed | Phase::LinkLost => return None,
+            Phase::Arming => {
+                return None;
+            }
+            Phase::Landing => {
+                if telemetry.armed == Some(false) {
+                    self.phase = Phase::Landed;
+                    self.link.set_sticks(None);
+                    self.sticks = None;
+                    self.say("landed".into());
+                }
+                return None;
+            }
+            Phase::TakingOff | Phase::Exploring | Phase::Holding | Phase::Returning => {}
+        }
+        // Low battery: home.
+        if let Some(pct) = telemetry.battery.and_then(|b| b.remaining_pct)
+            && pct < config.low_battery_pct
+            && matches!(
+                self.phase,
+                Phase::Exploring | Phase::TakingOff | Phase::Holding
+            )
+        {
+            self.return_home(&format!("battery at {pct} %"));
+        }
+        let Some(pose) = self.pose() else {
+            return self.fly_blind(now, config, telemetry.height_m);
+        };
+        self.blind_since = None;
+        let here = [pose[0], pose[1]];
+        let mut event = None;
+        match self.phase {
+            Phase::TakingOff => {
+                if pose[2] > self.altitude - 0.1 {
+                    // Airborne: look around once, so the first plan sees every side.
+                    self.phase = Phase::Exploring;
+                    self.scan = Some(Scan {
+                        since: now,
+                        yaw0: pose[3],
+                        give_up: None,
+                    });
+                    self.progress = (now, here);
+                }
+            }
+            Phase::Exploring => event = self.explore_step(now, pose, config),
+            Phase::Returning => {
+                let home = self.goal.unwrap_or(here);
+                if (home[0] - here[0]).hypot(home[1] - here[1]) < config.home_reach_m {
+                    self.say("home: landing".into());
+                    self.land();
+                    return None;
+                }
+                self.follow(pose);
+            }
+            Phase::Holding => {}
+            _ => return None,
+        }
+        let setpoint = Pose3 {
+            x: self.hold[0],
+            y: self.hold[1],
+            z: self.height_goal,
+            yaw: self.yaw_goal,
+        };
+        let estimate = Pose3 {
+            x: pose[0],
+            y: pose[1],
+            z: pose[2],
+            yaw: pose[3],
+        };
+        let c = self.controller.update(&setpoint, &estimate, dt);
+        self.set_sticks(Sticks {
+            roll: c.roll as f32,
+            pitch: c.pitch as f32,
+            yaw: c.yaw as f32,
+            throttle: c.throttle as f32,
+        });
+        event
+    }
+
+    /// No valid pose: hover level with altitude held (thesis Algorithm 7), climbing only to
+    /// finish a take-off, turning slowly so the camera sweeps back over known views; land after
+    /// too long.
+    fn fly_blind(
+        &mut self,
+        now: f64,
+        config: &DroneConfig,
+        height: Option<f32>,
+    ) -> Option<DroneEvent> {
+        let since = *self.blind_since.get_or_insert(now);
+        if now - since > config.blind_land_s {
+            self.say(format!(
+                "no pose for {:.0} s: landing where it is",
+                config.blind_land_s
+            ));
+            self.land();
+            return None;
+        }
+        let low = height.is_some_and(|h| f64::from(h) < self.altitude - 0.1);
+        let climb = if self.phase == Phase::TakingOff && low {
+            0.4
+        } else {
+            0.0
+        };
+        self.controller.reset();
+        self.set_sticks(Sticks {
+            throttle: climb,
+            yaw: config.blind_yaw,
+            ..Sticks::CENTRED
+        });
+        None
+    }
+
+    fn follow(&mut self, pose: [f64; 4]) -> Follow {
+        let f = self.follower.step(Some(Pose2 {
+            x: pose[0],
+            y: pose[1],
+            yaw: pose[3],
+        }));
+        match f {
+            Follow::Turn { at, yaw } => {
+                self.hold = at;
+                self.yaw_goal = yaw;
+            }
+            Follow::Track { carrot, yaw } => {
+                self.hold = carrot;
+                self.yaw_goal = yaw;
+            }
+            Follow::Hover | Follow::Arrived => {}
+        }
+        f
+    }
+
+    fn explore_step(
+        &mut self,
+        now: f64,
+        pose: [f64; 4],
+        config: &DroneConfig,
+    ) -> Option<DroneEvent> {
+        let here = [pose[0], pose[1]];
+        if (here[0] - self.progress.1[0]).hypot(here[1] - self.progress.1[1]) > 0.3 {
+            self.progress = (now, here);
+        }
+        if let Some(scan) = self.scan {
+            // A full turn on the spot (36°/s), then the goal (if any) is given up.
+            let t = now - scan.since;
+            if t < config.scan_s {
+                self.yaw_goal = scan.yaw0 + t * std::f64::consts::TAU / config.scan_s;
+                self.progress = (now, here);
+                return None;
+            }
+            self.scan = None;
+            return scan.give_up.map(DroneEvent::GiveUp);
+        }
+        if let Follow::Arrived = self.follow(pose) {
+            self.follower.set_path(vec![]);
+            self.scan = Some(Scan {
+                since: now,
+                yaw0: pose[3],
+                give_up: self.goal.take(),
+            });
+            self.hold = here;
+            return None;
+        }
+        if self.goal.is_some() && now - self.progress.0 > config.stuck_s {
+            tracing::warn!(
+                drone = self.id + 1,
+                "no progress for {} s: giving up its goal",
+                config.stuck_s
+            );
+            self.follower.set_path(vec![]);
+            self.progress = (now, here);
+            return self.goal.take().map(DroneEvent::GiveUp);
+        }
+        None
+    }
+
+    fn on_answer(&mut self, command: Command, result: Result<(), CommandError>) {
+        if let Err(e) = &result {
+            self.say(format!("{e}"));
+        }
+        match (self.phase, command, result.is_ok()) {
+            (Phase::Arming, Command::SetMode(_), true) => self.send(Command::Arm),
+            (Phase::Arming, Command::Arm, true) => match self.start_sequence {
+                StartSequence::Mavlink => self.airborne_next(),
+                StartSequence::Shield => self.send(Command::StartMotors),
+            },
+            (Phase::Arming, Command::StartMotors, true) => self.airborne_next(),
+            (Phase::Arming, _, false) => {
+                self.link.set_sticks(None);
+                self.phase = Phase::Idle;
+            }
+            (Phase::Landing, Command::Land, false) => {
+                // Land refused: keep trying from the next tick.
+                self.send(Command::Land);
+            }
+            _ => {}
+        }
+    }
+
+    fn airborne_next(&mut self) {
+        self.say("armed: taking off".into());
+        self.phase = Phase::TakingOff;
+        self.height_goal = self.altitude;
+        let e = self.ekf.estimate();
+        self.hold = [e.position[0], e.position[1]];
+        self.yaw_goal = e.attitude[2];
+        self.controller.reset();
+    }
+}

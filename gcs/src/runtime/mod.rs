@@ -1,0 +1,805 @@
+//! The mission runtime: per drone, camera frames and telemetry → SLAM → mission planner (1 Hz)
+//! → path → path follower and position controllers (10 Hz) → RC overrides through the link.
+//!
+//! Threads: the SLAM ([`perception`]) works through camera frames; the mission loop (this
+//! module) runs the drones' filters, state machines and controllers on the mission clock, plans
+//! once a second, obeys the operator's commands and publishes a [`Snapshot`] every tick, which
+//! displays read without ever waiting on SLAM, planning or I/O.
+//!
+//! Safety: a drone whose link is lost drops out (its goal goes to the others; the vehicle's own
+//! failsafe lands it) and rejoins if the link comes back while it still flies; a drone without a
+//! valid pose hovers level at its altitude and lands if that lasts; a low battery sends it home;
+//! `land all` always works.
+
+pub mod drone;
+pub mod perception;
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{Receiver, Sender, channel};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use link::{LinkStatus, Sticks, Telemetry};
+use nav::grid::Grid;
+use nav::mission::{PlannerConfig, Strategy};
+use slam::system::{RobotState, Slam};
+
+use crate::clock::Clock;
+use crate::record::{Record, Recorder};
+use drone::{Drone, DroneConfig, DroneEvent, DroneSpec, Phase};
+use perception::{CameraFrame, Perception, PerceptionResult, SensorLog, SensorSample, SlamView};
+
+/// Mission settings.
+#[derive(Debug, Clone)]
+pub struct RuntimeConfig {
+    /// How frontiers are assigned.
+    pub strategy: Strategy,
+    /// Plan with obstacles grown by the first of these radii that still leaves a reachable
+    /// frontier (a margin for tracking errors first, narrower gaps later), metres.
+    pub planner_radii: Vec<f64>,
+    /// Control period, seconds (mission clock).
+    pub control_period: f64,
+    /// Mission-planner period, seconds.
+    pub plan_period: f64,
+    /// Every drone's controllers and behaviour.
+    pub drone: DroneConfig,
+    /// Start the mission at once (headless), or wait for the operator.
+    pub auto_start: bool,
+    /// Give up and land this long after the start, seconds.
+    pub timeout: Option<f64>,
+    /// Exploration is not declared complete before this long after the start, seconds.
+    pub min_mission_s: f64,
+    /// End the runtime when every drone is down after the mission (headless).
+    pub exit_when_done: bool,
+}
+
+impl Default for RuntimeConfig {
+    fn default() -> Self {
+        Self {
+            strategy: Strategy::Hungarian,
+            planner_radii: vec![0.45, 0.35, 0.25],
+            control_period: 0.1,
+            plan_period: 1.0,
+            drone: DroneConfig::default(),
+            auto_start: true,
+            timeout: None,
+            min_mission_s: 10.0,
+            exit_when_done: true,
+        }
+    }
+}
+
+/// What the operator can ask for.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Operator {
+    /// Start the mission: every drone takes off and explores.
+    Start,
+    /// Every flying drone holds where it is.
+    Pause,
+    /// Back to exploring after a pause.
+    Resume,
+    /// Every drone lands where it is, now.
+    LandAll,
+    /// One drone.
+    Drone(usize, DroneCommand),
+    /// End the runtime (after landing whatever flies).
+    Shutdown,
+}
+
+/// A command to one drone (the thesis's control-test tab).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum DroneCommand {
+    /// Arm, start the motors and take off to its altitude band.
+    TakeOff,
+    /// Land where it is.
+    Land,
+    /// Disarm (only on the ground).
+    Disarm,
+    /// Hold position at this height (metres) and yaw (radians).
+    Hold {
+        /// Goal height.
+        height: f64,
+        /// Goal yaw.
+        yaw: f64,
+    },
+    /// Back to exploring after a hold.
+    Explore,
+    /// Fly to the start and land there.
+    ReturnHome,
+}
+
+/// The mission as a whole.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MissionState {
+    /// Waiting for the operator's start.
+    Waiting,
+    /// Drones take off and explore.
+    Exploring,
+    /// Every drone holds.
+    Paused,
+    /// The mission is over; drones are landing.
+    Finishing(Outcome),
+    /// Every drone is down.
+    Done(Outcome),
+}
+
+impl MissionState {
+    /// A short name for displays.
+    pub fn name(self) -> &'static str {
+        match self {
+            MissionState::Waiting => "waiting for start",
+            MissionState::Exploring => "exploring",
+            MissionState::Paused => "paused",
+            MissionState::Finishing(_) => "landing",
+            MissionState::Done(_) => "done",
+        }
+    }
+}
+
+/// Why a mission ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Outcome {
+    /// No reachable frontier was left.
+    Completed,
+    /// The timeout passed.
+    TimedOut,
+    /// The operator landed every drone.
+    LandAll,
+    /// No drone was left flying (links lost, landed by their failsafes).
+    NoDroneLeft,
+}
+
+impl Outcome {
+    /// A short name for displays and JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            Outcome::Completed => "completed",
+            Outcome::TimedOut => "timed out",
+            Outcome::LandAll => "land all",
+            Outcome::NoDroneLeft => "no drone left",
+        }
+    }
+}
+
+/// One drone as displays see it.
+#[derive(Debug, Clone)]
+pub struct DroneView {
+    /// Index in the fleet.
+    pub id: usize,
+    /// Display name.
+    pub name: String,
+    /// What it does.
+    pub phase: Phase,
+    /// Link health.
+    pub link: LinkStatus,
+    /// Latest telemetry.
+    pub telemetry: Telemetry,
+    /// The filter's pose (x, y, z, yaw), if valid.
+    pub pose: Option<[f64; 4]>,
+    /// Standard deviation of the filter's horizontal position, metres.
+    pub pose_sigma: f64,
+    /// SLAM tracking state.
+    pub slam: RobotState,
+    /// Its frontier (or home).
+    pub goal: Option<[f64; 2]>,
+    /// The path it follows.
+    pub path: Vec<[f64; 2]>,
+    /// Where it has been (x, y), decimated.
+    pub trajectory: Arc<Vec<[f64; 2]>>,
+    /// Goal height, metres.
+    pub height_goal: f64,
+    /// Goal yaw, radians.
+    pub yaw_goal: f64,
+    /// Sticks sent last.
+    pub sticks: Option<Sticks>,
+}
+
+/// The runtime's state at one moment.
+#[derive(Debug, Clone)]
+pub struct Snapshot {
+    /// Mission clock, seconds.
+    pub time: f64,
+    /// Seconds since the start of the mission (0 before it).
+    pub elapsed: f64,
+    /// The mission.
+    pub state: MissionState,
+    /// Every drone.
+    pub drones: Vec<DroneView>,
+    /// The 2D map the planner used last.
+    pub grid: Option<Arc<Grid>>,
+    /// The frontiers it saw (goal points).
+    pub frontiers: Vec<[f64; 2]>,
+    /// The SLAM.
+    pub slam: Arc<SlamView>,
+    /// Recent messages for the operator: (time, text).
+    pub messages: Vec<(f64, String)>,
+}
+
+/// What a finished runtime hands back.
+pub struct MissionReport {
+    /// How it ended (`None` if it was shut down before).
+    pub outcome: Option<Outcome>,
+    /// Seconds from the start to the last drone down.
+    pub mission_time_s: f64,
+    /// Per drone: name, final phase, distance flown by the filter, filter trajectory.
+    pub drones: Vec<DroneReport>,
+    /// The SLAM and what it saw.
+    pub perception: Option<PerceptionResult>,
+}
+
+/// One drone at the end.
+#[derive(Debug, Clone)]
+pub struct DroneReport {
+    /// Display name.
+    pub name: String,
+    /// Final phase.
+    pub phase: Phase,
+    /// Distance flown according to the filter, metres.
+    pub path_length_m: f64,
+    /// The filter's trajectory: (time, [x, y, z, yaw]).
+    pub trajectory: Vec<(f64, [f64; 4])>,
+}
+
+/// A running mission.
+pub struct Runtime {
+    commands: Sender<Operator>,
+    snapshot: Arc<Mutex<Arc<Snapshot>>>,
+    done: Arc<AtomicBool>,
+    thread: Option<JoinHandle<MissionReport>>,
+}
+
+impl Runtime {
+    /// Starts the mission loop and the SLAM for `drones`, with camera frames from `frames`.
+    pub fn start(
+        config: RuntimeConfig,
+        drones: Vec<DroneSpec>,
+        slam: Slam,
+        frames: Receiver<CameraFrame>,
+        clock: Arc<dyn Clock>,
+        recorder: Option<Recorder>,
+    ) -> std::io::Result<Self> {
+        let sensors = Arc::new(SensorLog::new(drones.len()));
+        let perception = Perception::start(slam, frames, sensors.clone(), recorder.clone())?;
+        let t0 = clock.now();
+        let drones: Vec<Drone> = drones
+            .into_iter()
+            .enumerate()
+            .map(|(k, spec)| Drone::new(k, spec, &config.drone, t0))
+            .collect();
+        let (commands, rx) = channel();
+        let first = Snapshot {
+            time: t0,
+            elapsed: 0.0,
+            state: MissionState::Waiting,
+            drones: vec![],
+            grid: None,
+            frontiers: vec![],
+            slam: Arc::new(SlamView::default()),
+            messages: vec![],
+        };
+        let snapshot = Arc::new(Mutex::new(Arc::new(first)));
+        let done = Arc::new(AtomicBool::new(false));
+        let mut mission = Mission {
+            config,
+            drones,
+            perception: Some(perception),
+            sensors,
+            clock,
+            commands: rx,
+            snapshot: snapshot.clone(),
+            state: MissionState::Waiting,
+            started: None,
+            blacklist: vec![],
+            grid: None,
+            frontiers: vec![],
+            messages: vec![],
+            trajectories: vec![],
+            recorder,
+            last_plan_record: f64::NEG_INFINITY,
+        };
+        let thread = {
+            let done = done.clone();
+            std::thread::Builder::new()
+                .name("mission".into())
+                .spawn(move || {
+                    let report = mission.run();
+                    done.store(true, Ordering::Relaxed);
+                    report
+                })?
+        };
+        Ok(Self {
+            commands,
+            snapshot,
+            done,
+            thread: Some(thread),
+        })
+    }
+
+    /// Sends an operator command (taken at the next tick).
+    pub fn send(&self, command: Operator) {
+        let _ = self.commands.send(command);
+    }
+
+    /// A sender for operator commands, for other threads.
+    pub fn commander(&self) -> Sender<Operator> {
+        self.commands.clone()
+    }
+
+    /// The latest snapshot, at once.
+    pub fn snapshot(&self) -> Arc<Snapshot> {
+        self.snapshot
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone()
+    }
+
+    /// A handle to read snapshots from other threads.
+    pub fn snapshots(&self) -> Arc<Mutex<Arc<Snapshot>>> {
+        self.snapshot.clone()
+    }
+
+    /// Whether the mission loop has ended.
+    pub fn finished(&self) -> bool {
+        self.done.load(Ordering::Relaxed)
+    }
+
+    /// Waits for the mission loop to end and takes its report.
+    pub fn join(mut self) -> Option<MissionReport> {
+        self.thread.take()?.join().ok()
+    }
+}
+
+impl Drop for Runtime {
+    fn drop(&mut self) {
+        if let Some(t) = self.thread.take() {
+            let _ = self.commands.send(Operator::Shutdown);
+            let _ = t.join();
+        }
+    }
+}
+
+struct Mission {
+    config: RuntimeConfig,
+    drones: Vec<Drone>,
+    perception: Option<Perception>,
+    sensors: Arc<SensorLog>,
+    clock: Arc<dyn Clock>,
+    commands: Receiver<Operator>,
+    snapshot: Arc<Mutex<Arc<Snapshot>>>,
+    state: MissionState,
+    started: Option<f64>,
+    /// Goals given up for good.
+    blacklist: Vec<[f64; 2]>,
+    grid: Option<Arc<Grid>>,
+    frontiers: Vec<[f64; 2]>,
+    messages: Vec<(f64, String)>,
+    /// Decimated trajectories for displays.
+    trajectories: Vec<Arc<Vec<[f64; 2]>>>,
+    recorder: Option<Recorder>,
+    last_plan_record: f64,
+}
+
+impl Mission {
+    fn run(&mut self) -> MissionReport {
+        self.trajectories = (0..self.drones.len()).map(|_| Arc::default()).collect();
+        let mut next_control = self.clock.now();
+        let mut next_plan = next_control + 2.0;
+        let mut shutdown = false;
+        if self.config.auto_start {
+            self.operate(Operator::Start);
+        }
+        loop {
+            let now = self.clock.now();
+            for command in self.commands.try_iter().collect::<Vec<_>>() {
+                if command == Operator::Shutdown {
+                    shutdown = true;
+                }
+                self.operate(command);
+            }
+            if let Some(p) = &self.perception {
+                for fix in p.take_fixes() {
+                    if let (Some(d), Some(pose)) =
+                        (self.drones.get_mut(fix.drone), fix.map_from_body)
+                    {
+                        let v = pose.translation.vector;
+                        let x = pose.rotation * nalgebra::Vector3::x();
+                        d.ekf
+                            .update_slam(fix.stamp, [v.x, v.y, v.z], x.y.atan2(x.x));
+                    }
+                }
+            }
+            if now >= next_control {
+                next_control = (next_control + self.config.control_period).max(now - 1.0);
+                self.control(now);
+                self.publish(now);
+            }
+            if now >= next_plan {
+                next_plan = (next_plan + self.config.plan_period).max(now - 1.0);
+                if matches!(self.state, MissionState::Exploring) {
+                    self.plan(now);
+                } else {
+                    self.refresh_map();
+                }
+                self.plan_home();
+            }
+            self.check_end(now);
+            if let MissionState::Done(_) = self.state
+                && (self.config.exit_when_done || shutdown)
+            {
+                break;
+            }
+            if shutdown
+                && self
+                    .drones
+                    .iter()
+                    .all(|d| !d.phase.flying() && d.phase != Phase::Landing)
+            {
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        self.publish(self.clock.now());
+        let end = self.clock.now();
+        let outcome = match self.state {
+            MissionState::Done(o) | MissionState::Finishing(o) => Some(o),
+            _ => None,
+        };
+        for d in &self.drones {
+            if d.phase != Phase::LinkLost {
+                d.link.set_sticks(None);
+            }
+        }
+        let perception = self.perception.take().and_then(Perception::finish);
+        if let Some(r) = &mut self.recorder {
+            // Close the log with the mission; the recorder's owner reads (and reports) the
+            // result from its own `finish`.
+            let _ = r.finish();
+        }
+        MissionReport {
+            outcome,
+            mission_time_s: self.started.map_or(0.0, |s| end - s),
+            drones: self
+                .drones
+                .iter()
+                .map(|d| DroneReport {
+                    name: d.name.clone(),
+                    phase: d.phase,
+                    path_length_m: d.path_length,
+                    trajectory: d.trajectory.clone(),
+                })
+                .collect(),
+            perception,
+        }
+    }
+
+    fn say(&mut self, now: f64, text: String) {
+        tracing::info!("{text}");
+        self.messages.push((now, text));
+        if self.messages.len() > 50 {
+            self.messages.remove(0);
+        }
+    }
+
+    fn operate(&mut self, command: Operator) {
+        let now = self.clock.now();
+        if let Some(r) = &self.recorder {
+            r.send(Record::Operator {
+                t: now,
+                command: format!("{command:?}"),
+            });
+        }
+        match command {
+            Operator::Start => {
+                if matches!(self.state, MissionState::Waiting | MissionState::Done(_)) {
+                    self.say(now, "mission started".into());
+                    self.state = MissionState::Exploring;
+                    self.started = Some(now);
+                    self.blacklist.clear();
+                    for d in &mut self.drones {
+                        d.take_off();
+                    }
+                }
+            }
+            Operator::Pause => {
+                if self.state == MissionState::Exploring {
+                    self.state = MissionState::Paused;
+                    for d in &mut self.drones {
+                        if d.phase == Phase::Exploring {
+                            let (h, y) = (d.altitude, d.pose().map_or(d.yaw_goal, |p| p[3]));
+                            d.hold(h, y);
+                        }
+                    }
+                    self.say(now, "mission paused: every drone holds".into());
+                }
+            }
+            Operator::Resume => {
+                if self.state == MissionState::Paused {
+                    self.state = MissionState::Exploring;
+                    for d in &mut self.drones {
+                        d.resume();
+                    }
+                    self.say(now, "mission resumed".into());
+                }
+            }
+            Operator::LandAll | Operator::Shutdown => {
+                for d in &mut self.drones {
+                    d.land();
+                }
+                if !matches!(self.state, MissionState::Done(_)) {
+                    self.state = MissionState::Finishing(Outcome::LandAll);
+                }
+                self.say(now, "land all".into());
+            }
+            Operator::Drone(k, c) => {
+                let Some(d) = self.drones.get_mut(k) else {
+                    return;
+                };
+                match c {
+                    DroneCommand::TakeOff => {
+                        d.take_off();
+                        if matches!(self.state, MissionState::Waiting | MissionState::Done(_)) {
+                            self.state = MissionState::Exploring;
+                            self.started.get_or_insert(now);
+                        }
+                    }
+                    DroneCommand::Land => d.land(),
+                    DroneCommand::Disarm => {
+                        if matches!(d.phase, Phase::Idle | Phase::Landed) {
+                            d.disarm();
+                        }
+                    }
+                    DroneCommand::Hold { height, yaw } => d.hold(height.clamp(0.3, 2.4), yaw),
+                    DroneCommand::Explore => d.resume(),
+                    DroneCommand::ReturnHome => d.return_home("operator"),
+                }
+            }
+        }
+    }
+
+    fn control(&mut self, now: f64) {
+        for k in 0..self.drones.len() {
+            let event = self.drones[k].tick(now, &self.config.drone);
+            let d = &self.drones[k];
+            let t = d.link.telemetry();
+            self.sensors.push(
+                k,
+                SensorSample {
+                    t: now,
+                    heading: t.yaw_rad.map(f64::from),
+                    height: t.height_m.map(f64::from),
+                    body: d.pose(),
+                },
+            );
+            if let Some(r) = &self.recorder {
+                r.send(Record::Drone {
+                    t: now,
+                    drone: k,
+                    telemetry: t,
+                    sticks: d.sticks,
+                    pose: d.pose(),
+                    phase: d.phase.name(),
+                });
+            }
+            if let Some(DroneEvent::GiveUp(goal)) = event {
+                tracing::info!(
+                    drone = k + 1,
+                    ?goal,
+                    "frontier goal closed: reached or unreachable"
+                );
+                self.blacklist.push(goal);
+            }
+            let messages = self.drones[k].take_messages();
+            let name = self.drones[k].name.clone();
+            for m in messages {
+                self.say(now, format!("{name}: {m}"));
+            }
+        }
+        if let Some(started) = self.started
+            && let Some(limit) = self.config.timeout
+            && now - started > limit
+            && matches!(self.state, MissionState::Exploring | MissionState::Paused)
+        {
+            self.say(now, format!("timeout after {limit:.0} s: landing"));
+            self.finish(Outcome::TimedOut);
+        }
+    }
+
+    fn finish(&mut self, outcome: Outcome) {
+        self.state = MissionState::Finishing(outcome);
+        for d in &mut self.drones {
+            d.land();
+        }
+    }
+
+    fn check_end(&mut self, now: f64) {
+        let all_down = self
+            .drones
+            .iter()
+            .all(|d| matches!(d.phase, Phase::Landed | Phase::LinkLost | Phase::Idle));
+        match self.state {
+            MissionState::Finishing(o) if all_down => {
+                self.say(
+                    now,
+                    format!("mission over ({}): every drone is down", o.name()),
+                );
+                self.state = MissionState::Done(o);
+            }
+            MissionState::Exploring | MissionState::Paused
+                if all_down
+                    && self
+                        .drones
+                        .iter()
+                        .any(|d| matches!(d.phase, Phase::Landed | Phase::LinkLost)) =>
+            {
+                self.say(now, "no drone left flying".into());
+                self.state = MissionState::Done(Outcome::NoDroneLeft);
+            }
+            _ => {}
+        }
+    }
+
+    fn refresh_map(&mut self) {
+        if let Some(p) = &self.perception {
+            self.grid = p.map().project().map(Arc::new);
+        }
+    }
+
+    fn plan(&mut self, now: f64) {
+        self.refresh_map();
+        let Some(grid) = self.grid.clone() else {
+            return;
+        };
+        let exploring: Vec<usize> = (0..self.drones.len())
+            .filter(|&k| self.drones[k].phase == Phase::Exploring)
+            .collect();
+        if exploring.is_empty() {
+            return;
+        }
+        let robots: Vec<Option<[f64; 2]>> = exploring
+            .iter()
+            .map(|&k| {
+                let p = self.drones[k].pose()?;
+                grid.cell_of([p[0], p[1]]).map(|_| [p[0], p[1]])
+            })
+            .collect();
+        let planners: Vec<PlannerConfig> = self
+            .config
+            .planner_radii
+            .iter()
+            .map(|&robot_radius_m| PlannerConfig {
+                strategy: self.config.strategy,
+                robot_radius_m,
+                blacklist: self.blacklist.clone(),
+                ..PlannerConfig::default()
+            })
+            .collect();
+        let mut chosen = None;
+        for p in &planners {
+            match nav::mission::plan(&grid, &robots, p) {
+                Ok(plan) if !plan.complete => {
+                    chosen = Some(plan);
+                    break;
+                }
+                Ok(plan) => chosen = Some(plan),
+                Err(e) => {
+                    tracing::warn!("planner: {e}");
+                    return;
+                }
+            }
+        }
+        let Some(plan) = chosen else {
+            return;
+        };
+        self.frontiers = plan
+            .frontiers
+            .iter()
+            .map(|f| plan.inflated.center_of(f.goal))
+            .collect();
+        for (i, &k) in exploring.iter().enumerate() {
+            let path = plan.robots[i].path.clone();
+            self.drones[k].set_plan(path.last().copied(), path, now);
+        }
+        if let Some(r) = &self.recorder
+            && now - self.last_plan_record >= 1.0
+        {
+            r.send(Record::Plan {
+                t: now,
+                goals: exploring
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &k)| (k, plan.robots[i].path.last().copied()))
+                    .collect(),
+                frontiers: self.frontiers.clone(),
+            });
+            r.send(Record::Grid {
+                t: now,
+                grid: grid.clone(),
+            });
+            self.last_plan_record = now;
+        }
+        let elapsed = self.started.map_or(0.0, |s| now - s);
+        // Complete only when every exploring drone could plan: one without a pose might be
+        // the only one that can reach what is left.
+        let all_valid = robots.iter().all(Option::is_some);
+        let airborne = self.drones.iter().all(|d| d.phase != Phase::TakingOff);
+        if plan.complete && all_valid && airborne && elapsed > self.config.min_mission_s {
+            self.say(
+                now,
+                format!("no reachable frontier left after {elapsed:.0} s: landing"),
+            );
+            self.finish(Outcome::Completed);
+        }
+    }
+
+    /// Paths home for returning drones.
+    fn plan_home(&mut self) {
+        let Some(grid) = self.grid.clone() else {
+            return;
+        };
+        let radius = self.config.planner_radii.last().copied().unwrap_or(0.25);
+        for d in &mut self.drones {
+            if d.phase != Phase::Returning {
+                continue;
+            }
+            let (Some(p), Some(home)) = (d.pose(), d.goal) else {
+                continue;
+            };
+            match nav::mission::route(&grid, [p[0], p[1]], home, radius) {
+                Some(path) => d.set_home_path(path),
+                None => {
+                    // No known way home: land where it is.
+                    d.land();
+                }
+            }
+        }
+    }
+
+    fn publish(&mut self, now: f64) {
+        let view = self
+            .perception
+            .as_ref()
+            .map(Perception::view)
+            .unwrap_or_default();
+        for (k, d) in self.drones.iter().enumerate() {
+            if let Some(p) = d.pose() {
+                let last = self.trajectories[k].last().copied();
+                if last.is_none_or(|l| (l[0] - p[0]).hypot(l[1] - p[1]) > 0.05) {
+                    Arc::make_mut(&mut self.trajectories[k]).push([p[0], p[1]]);
+                }
+            }
+        }
+        let drones = self
+            .drones
+            .iter()
+            .enumerate()
+            .map(|(k, d)| DroneView {
+                id: k,
+                name: d.name.clone(),
+                phase: d.phase,
+                link: d.link.status(),
+                telemetry: d.link.telemetry(),
+                pose: d.pose(),
+                pose_sigma: d.ekf.estimate().position_sigma,
+                slam: view.robots.get(k).map_or(RobotState::Waiting, |r| r.state),
+                goal: d.goal,
+                path: d.path().to_vec(),
+                trajectory: self.trajectories[k].clone(),
+                height_goal: d.height_goal,
+                yaw_goal: d.yaw_goal,
+                sticks: d.sticks,
+            })
+            .collect();
+        let s = Snapshot {
+            time: now,
+            elapsed: self.started.map_or(0.0, |s| now - s),
+            state: self.state,
+            drones,
+            grid: self.grid.clone(),
+            frontiers: self.frontiers.clone(),
+            slam: view,
+            messages: self.messages.clone(),
+        };
+        *self.snapshot.lock().unwrap_or_else(PoisonError::into_inner) = Arc::new(s);
+    }
+}

@@ -1,0 +1,329 @@
+//! The SLAM on its own thread: camera frames from every drone come in, each is given what its
+//! vehicle measured at the frame's time (IMU heading, rangefinder height, and the filter's
+//! prediction for relocalisation), one multi-robot SLAM processes them, and pose fixes go out to
+//! the drones' filters. Readers get the latest SLAM state and the live map at any moment.
+
+use std::collections::VecDeque;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, Sender, channel};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use link::camera::RgbdFrame;
+use nalgebra::Isometry3;
+use slam::livemap::MapHandle;
+use slam::system::{Frame, RobotEstimate, Slam, SlamStats, Tracking};
+use slam::trajectory::Stamped;
+
+use crate::record::{Record, Recorder};
+
+/// One camera frame of one drone, stamped on the mission clock.
+#[derive(Debug, Clone)]
+pub struct CameraFrame {
+    /// The drone (index in the fleet).
+    pub drone: usize,
+    /// Capture time on the mission clock, seconds.
+    pub stamp: f64,
+    /// The frame.
+    pub frame: Arc<RgbdFrame>,
+    /// The camera's true pose, when a simulator knows it (for evaluation only).
+    pub truth: Option<Isometry3<f64>>,
+}
+
+/// What a vehicle measured at one moment, for the SLAM to read at a frame's time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SensorSample {
+    /// Mission clock, seconds.
+    pub t: f64,
+    /// IMU heading, radians.
+    pub heading: Option<f64>,
+    /// Rangefinder height above the floor, metres.
+    pub height: Option<f64>,
+    /// The filter's body pose (x, y, z, yaw), if valid.
+    pub body: Option<[f64; 4]>,
+}
+
+/// The recent sensor samples of every drone (written by the control loop).
+#[derive(Debug, Default)]
+pub struct SensorLog(Mutex<Vec<VecDeque<SensorSample>>>);
+
+impl SensorLog {
+    /// A log for `n` drones.
+    pub fn new(n: usize) -> Self {
+        Self(Mutex::new(vec![VecDeque::new(); n]))
+    }
+
+    /// Records a sample of drone `k` (the last 3 s are kept).
+    pub fn push(&self, k: usize, s: SensorSample) {
+        let mut log = self.0.lock().unwrap_or_else(PoisonError::into_inner);
+        if let Some(q) = log.get_mut(k) {
+            q.push_back(s);
+            while q.front().is_some_and(|f| s.t - f.t > 3.0) {
+                q.pop_front();
+            }
+        }
+    }
+
+    /// Drone `k`'s sample nearest to time `t` (within 0.25 s).
+    pub fn at(&self, k: usize, t: f64) -> Option<SensorSample> {
+        let log = self.0.lock().unwrap_or_else(PoisonError::into_inner);
+        log.get(k)?
+            .iter()
+            .min_by(|a, b| (a.t - t).abs().total_cmp(&(b.t - t).abs()))
+            .copied()
+            .filter(|s| (s.t - t).abs() < 0.25)
+    }
+}
+
+/// A SLAM pose of one drone's body at a frame's time (`None`: tracking lost).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SlamFix {
+    /// The drone.
+    pub drone: usize,
+    /// The frame's capture time, mission clock.
+    pub stamp: f64,
+    /// Body to map; `None` while lost (or not yet anchored in the map).
+    pub map_from_body: Option<Isometry3<f64>>,
+}
+
+/// The SLAM's state for displays.
+#[derive(Debug, Clone, Default)]
+pub struct SlamView {
+    /// Every robot's estimate.
+    pub robots: Vec<RobotEstimate>,
+    /// Counters.
+    pub stats: SlamStats,
+    /// Frames processed.
+    pub frames: u64,
+    /// Mean SLAM time per frame over the last 100, milliseconds.
+    pub ms_per_frame: f64,
+}
+
+/// What the SLAM thread leaves behind.
+pub struct PerceptionResult {
+    /// The SLAM, for the final trajectories, map and graph.
+    pub slam: Slam,
+    /// Per drone, the true camera poses at its frames (when the source knew them).
+    pub truth: Vec<Vec<Stamped>>,
+    /// Per drone, the camera poses as estimated when each frame was processed (what the drones
+    /// flew on), map frame.
+    pub online: Vec<Vec<Stamped>>,
+}
+
+/// The SLAM thread.
+pub struct Perception {
+    thread: Option<JoinHandle<PerceptionResult>>,
+    stop: Arc<AtomicBool>,
+    fixes: Receiver<SlamFix>,
+    view: Arc<Mutex<Arc<SlamView>>>,
+    map: MapHandle,
+    frames: Arc<AtomicU64>,
+}
+
+impl Perception {
+    /// Starts the SLAM thread on `frames`.
+    pub fn start(
+        slam: Slam,
+        frames: Receiver<CameraFrame>,
+        sensors: Arc<SensorLog>,
+        recorder: Option<Recorder>,
+    ) -> std::io::Result<Self> {
+        let (fix_tx, fixes) = channel();
+        let view = Arc::new(Mutex::new(Arc::new(SlamView::default())));
+        let stop = Arc::new(AtomicBool::new(false));
+        let map = slam.map();
+        let count = Arc::new(AtomicU64::new(0));
+        let thread = {
+            let (view, stop, count) = (view.clone(), stop.clone(), count.clone());
+            std::thread::Builder::new()
+                .name("slam".into())
+                .spawn(move || {
+                    let io = Io {
+                        frames: &frames,
+                        sensors: &sensors,
+                        fixes: &fix_tx,
+                        view: &view,
+                        stop: &stop,
+                        count: &count,
+                        recorder: recorder.as_ref(),
+                    };
+                    run(slam, &io)
+                })?
+        };
+        Ok(Self {
+            thread: Some(thread),
+            stop,
+            fixes,
+            view,
+            map,
+            frames: count,
+        })
+    }
+
+    /// The fixes produced since the last call.
+    pub fn take_fixes(&self) -> Vec<SlamFix> {
+        self.fixes.try_iter().collect()
+    }
+
+    /// The SLAM's latest state.
+    pub fn view(&self) -> Arc<SlamView> {
+        self.view
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone()
+    }
+
+    /// The live map.
+    pub fn map(&self) -> MapHandle {
+        self.map.clone()
+    }
+
+    /// Frames processed so far.
+    pub fn frames(&self) -> u64 {
+        self.frames.load(Ordering::Relaxed)
+    }
+
+    /// Stops the thread (after the frame in progress) and returns what it built.
+    pub fn finish(mut self) -> Option<PerceptionResult> {
+        self.stop.store(true, Ordering::Relaxed);
+        self.thread.take()?.join().ok()
+    }
+}
+
+impl Drop for Perception {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+/// What the SLAM thread reads from and writes to.
+#[derive(Clone, Copy)]
+struct Io<'a> {
+    frames: &'a Receiver<CameraFrame>,
+    sensors: &'a SensorLog,
+    fixes: &'a Sender<SlamFix>,
+    view: &'a Mutex<Arc<SlamView>>,
+    stop: &'a AtomicBool,
+    count: &'a AtomicU64,
+    recorder: Option<&'a Recorder>,
+}
+
+fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
+    let Io {
+        frames,
+        sensors,
+        fixes,
+        view,
+        stop,
+        count,
+        recorder,
+    } = *io;
+    let n = slam.robots();
+    let mut truth = vec![vec![]; n];
+    let mut online = vec![vec![]; n];
+    let mut times: VecDeque<f64> = VecDeque::new();
+    while !stop.load(Ordering::Relaxed) {
+        let Ok(f) = frames.recv_timeout(Duration::from_millis(50)) else {
+            continue;
+        };
+        let k = f.drone;
+        if let Some(r) = recorder {
+            r.send(Record::Camera {
+                t: f.stamp,
+                drone: k,
+                frame: f.frame.clone(),
+            });
+        }
+        if k >= n {
+            tracing::warn!(
+                drone = k + 1,
+                "camera frame of a drone the SLAM does not know; dropped"
+            );
+            continue;
+        }
+        let known = slam.config().known_poses;
+        let Some(frame) = to_slam_frame(&f, sensors.at(k, f.stamp), known) else {
+            tracing::warn!(drone = k + 1, "malformed camera frame dropped");
+            continue;
+        };
+        let started = std::time::Instant::now();
+        let report = match slam.process(frame) {
+            Ok(r) => r,
+            Err(e) => {
+                tracing::warn!(drone = k + 1, "camera frame refused: {e}");
+                continue;
+            }
+        };
+        times.push_back(started.elapsed().as_secs_f64());
+        if times.len() > 100 {
+            times.pop_front();
+        }
+        if let Tracking::Lost(why) = &report.tracking {
+            tracing::debug!(drone = k + 1, "tracking lost: {why}");
+        }
+        if let Some(t) = f.truth {
+            truth[k].push(Stamped {
+                t: f.stamp,
+                pose: t,
+            });
+        }
+        let estimate = slam.estimate(k);
+        if let Some(pose) = estimate.as_ref().and_then(RobotEstimate::map_from_camera) {
+            online[k].push(Stamped { t: f.stamp, pose });
+        }
+        let _ = fixes.send(SlamFix {
+            drone: k,
+            stamp: f.stamp,
+            map_from_body: estimate.as_ref().and_then(RobotEstimate::map_from_body),
+        });
+        let processed = count.fetch_add(1, Ordering::Relaxed) + 1;
+        let published = SlamView {
+            robots: (0..n).filter_map(|r| slam.estimate(r)).collect(),
+            stats: slam.stats(),
+            frames: processed,
+            ms_per_frame: times.iter().sum::<f64>() / times.len().max(1) as f64 * 1e3,
+        };
+        *view.lock().unwrap_or_else(PoisonError::into_inner) = Arc::new(published);
+    }
+    slam.finish();
+    PerceptionResult {
+        slam,
+        truth,
+        online,
+    }
+}
+
+/// The SLAM's input for a camera frame and the vehicle's sample at its time (with the true
+/// camera pose only when the SLAM maps on known poses).
+fn to_slam_frame(f: &CameraFrame, sample: Option<SensorSample>, known: bool) -> Option<Frame> {
+    let rgb = image::RgbImage::from_raw(f.frame.width, f.frame.height, f.frame.rgb.clone())?;
+    let grey = image::DynamicImage::ImageRgb8(rgb).into_luma8();
+    let i = f.frame.intrinsics;
+    let predicted = sample.and_then(|s| s.body).map(|b| {
+        Isometry3::new(
+            nalgebra::Vector3::new(b[0], b[1], b[2]),
+            nalgebra::Vector3::z() * b[3],
+        )
+    });
+    Some(Frame {
+        robot: f.drone,
+        stamp: f.stamp,
+        grey,
+        depth: f.frame.depth_mm.clone(),
+        depth_scale: 0.001,
+        camera: slam::dataset::Pinhole {
+            fx: f64::from(i.fx),
+            fy: f64::from(i.fy),
+            cx: f64::from(i.cx),
+            cy: f64::from(i.cy),
+        },
+        heading: sample.and_then(|s| s.heading),
+        height: sample.and_then(|s| s.height),
+        predicted_body: predicted,
+        known_camera_pose: f.truth.filter(|_| known),
+    })
+}

@@ -1,0 +1,580 @@
+//! An extended Kalman filter for one multirotor (seed 002 ch. 4): it predicts the vehicle's
+//! motion from the sticks the station commands, with the model of a multirotor behind a
+//! stabilising flight controller (sticks → lean angles, yaw rate and climb rate, each following
+//! with a first-order lag; lean accelerates, drag slows), and corrects it with the SLAM pose,
+//! the IMU heading and the rangefinder height. Controllers read a smooth pose at the control
+//! rate, between camera frames and through short tracking losses.
+//!
+//! State: position (x, y, z), velocity (vx, vy, vz), roll, pitch, yaw, yaw rate — map frame,
+//! body FLU (+ roll banks right, + pitch noses down, + yaw anticlockwise). Measurements that arrive late (a camera frame processed after its capture)
+//! are compared with the state at their capture time and the correction applied now.
+
+use std::collections::VecDeque;
+
+use nalgebra::{SMatrix, SVector};
+
+const N: usize = 10;
+type State = SVector<f64, N>;
+type Cov = SMatrix<f64, N, N>;
+
+/// Indices into the state.
+const PX: usize = 0;
+const PY: usize = 1;
+const PZ: usize = 2;
+const VX: usize = 3;
+const VZ: usize = 5;
+const ROLL: usize = 6;
+const PITCH: usize = 7;
+const YAW: usize = 8;
+const YAW_RATE: usize = 9;
+
+/// Gravity, m/s².
+const G: f64 = 9.81;
+
+/// The vehicle model and the noise of everything.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EkfConfig {
+    /// Lean angle at full roll or pitch stick, radians.
+    pub max_lean: f64,
+    /// Time constant of the attitude response, seconds.
+    pub attitude_tau: f64,
+    /// Yaw rate at full yaw stick (+ stick = clockwise), rad/s.
+    pub max_yaw_rate: f64,
+    /// Time constant of the yaw-rate response, seconds.
+    pub yaw_tau: f64,
+    /// Climb rate at full throttle (altitude hold), m/s.
+    pub max_climb: f64,
+    /// Time constant of the climb-rate response, seconds.
+    pub climb_tau: f64,
+    /// Linear drag, 1/s.
+    pub drag: f64,
+    /// Stick dead band around centre.
+    pub deadband: f64,
+    /// Process noise: horizontal and vertical acceleration (gusts, model error), m/s² per √s.
+    pub accel_noise: (f64, f64),
+    /// Process noise of the attitude and yaw rate, rad/s per √s.
+    pub attitude_noise: f64,
+    /// SLAM position noise (1 σ), metres.
+    pub slam_position_sigma: f64,
+    /// SLAM yaw noise (1 σ), radians.
+    pub slam_yaw_sigma: f64,
+    /// IMU heading noise (1 σ), radians.
+    pub heading_sigma: f64,
+    /// Rangefinder height noise (1 σ), metres.
+    pub height_sigma: f64,
+    /// Attitude (roll, pitch) noise of the flight controller's estimate, radians.
+    pub attitude_sigma: f64,
+    /// Measurements whose normalised innovation² exceeds this are outliers (a yaw spike, a
+    /// table under the sonar).
+    pub gate_chi2: f64,
+    /// The pose is valid while the position's standard deviation stays below this, metres.
+    pub max_position_sigma: f64,
+}
+
+impl Default for EkfConfig {
+    fn default() -> Self {
+        Self {
+            max_lean: 20f64.to_radians(),
+            attitude_tau: 0.15,
+            max_yaw_rate: 90f64.to_radians(),
+            yaw_tau: 0.1,
+            max_climb: 1.0,
+            climb_tau: 0.3,
+            drag: 0.6,
+            deadband: 0.05,
+            accel_noise: (0.5, 0.3),
+            attitude_noise: 0.2,
+            slam_position_sigma: 0.03,
+            slam_yaw_sigma: 1.5f64.to_radians(),
+            heading_sigma: 1f64.to_radians(),
+            height_sigma: 0.03,
+            attitude_sigma: 1f64.to_radians(),
+            gate_chi2: 16.0,
+            max_position_sigma: 0.35,
+        }
+    }
+}
+
+/// The sticks as the model reads them: −1…1 each (+ roll = right, + pitch = forward,
+/// + yaw = clockwise, + throttle = climb).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Input {
+    /// Roll stick.
+    pub roll: f64,
+    /// Pitch stick.
+    pub pitch: f64,
+    /// Yaw stick.
+    pub yaw: f64,
+    /// Throttle stick (altitude hold: climb rate).
+    pub throttle: f64,
+}
+
+/// The filtered pose for controllers.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Estimate {
+    /// Position in the map, metres.
+    pub position: [f64; 3],
+    /// Velocity in the map, m/s.
+    pub velocity: [f64; 3],
+    /// Roll, pitch, yaw, radians.
+    pub attitude: [f64; 3],
+    /// Yaw rate, rad/s.
+    pub yaw_rate: f64,
+    /// Standard deviation of the horizontal position, metres.
+    pub position_sigma: f64,
+}
+
+/// What a measurement did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Update {
+    /// Used.
+    Applied,
+    /// Rejected by the innovation gate.
+    Outlier,
+    /// The filter has no fix yet, or the measurement is older than the history.
+    Ignored,
+}
+
+/// The filter of one vehicle.
+#[derive(Debug, Clone)]
+pub struct Ekf {
+    config: EkfConfig,
+    x: State,
+    p: Cov,
+    t: f64,
+    input: Input,
+    /// A SLAM fix has initialised the horizontal state.
+    fixed: bool,
+    /// Recent (time, state), to compare late measurements with.
+    history: VecDeque<(f64, State)>,
+    outliers: u64,
+}
+
+/// No state speed beyond this, m/s.
+const MAX_SPEED: f64 = 10.0;
+
+fn wrap(a: f64) -> f64 {
+    (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI
+}
+
+impl Ekf {
+    /// A filter for a vehicle resting at `position` facing `yaw`, at time `t` (seconds). Until
+    /// the first SLAM fix its horizontal position counts as unknown.
+    pub fn new(config: EkfConfig, t: f64, position: [f64; 3], yaw: f64) -> Self {
+        let mut x = State::zeros();
+        x[PX] = position[0];
+        x[PY] = position[1];
+        x[PZ] = position[2];
+        x[YAW] = yaw;
+        let mut p = Cov::identity() * 1e-4;
+        for i in [PX, PY] {
+            p[(i, i)] = 100.0;
+        }
+        p[(YAW, YAW)] = 1.0;
+        Self {
+            config,
+            x,
+            p,
+            t,
+            input: Input::default(),
+            fixed: false,
+            history: VecDeque::new(),
+            outliers: 0,
+        }
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &EkfConfig {
+        &self.config
+    }
+
+    /// Time of the state, seconds.
+    pub fn time(&self) -> f64 {
+        self.t
+    }
+
+    /// Measurements rejected so far.
+    pub fn outliers(&self) -> u64 {
+        self.outliers
+    }
+
+    /// The estimate now.
+    pub fn estimate(&self) -> Estimate {
+        Estimate {
+            position: [self.x[PX], self.x[PY], self.x[PZ]],
+            velocity: [self.x[VX], self.x[VX + 1], self.x[VZ]],
+            attitude: [self.x[ROLL], self.x[PITCH], wrap(self.x[YAW])],
+            yaw_rate: self.x[YAW_RATE],
+            position_sigma: (0.5 * (self.p[(PX, PX)] + self.p[(PY, PY)]))
+                .max(0.0)
+                .sqrt(),
+        }
+    }
+
+    /// The estimate, if good enough to fly on: a SLAM fix was had and the horizontal
+    /// uncertainty has not grown past [`EkfConfig::max_position_sigma`] since.
+    pub fn valid_estimate(&self) -> Option<Estimate> {
+        let e = self.estimate();
+        (self.fixed && e.position_sigma <= self.config.max_position_sigma).then_some(e)
+    }
+
+    /// Sets the sticks in force from now on.
+    pub fn set_input(&mut self, input: Input) {
+        self.input = input;
+    }
+
+    fn stick(&self, v: f64) -> f64 {
+        let d = self.config.deadband;
+        let v = v.clamp(-1.0, 1.0);
+        if v.abs() <= d {
+            0.0
+        } else {
+            (v - d * v.signum()) / (1.0 - d)
+        }
+    }
+
+    /// The state's time derivative under the current input.
+    fn derivative(&self, x: &State) -> State {
+        let c = &self.config;
+        let u = self.input;
+        let mut dx = State::zeros();
+        let (roll_t, pitch_t) = (
+            self.stick(u.roll) * c.max_lean,
+            self.stick(u.pitch) * c.max_lean,
+        );
+        let rate_t = -self.stick(u.yaw) * c.max_yaw_rate;
+        let climb_t = self.stick(u.throttle) * c.max_climb;
+        let (s, co) = x[YAW].sin_cos();
+        let a_fwd = G * x[PITCH].tan();
+        let a_left = -G * x[ROLL].tan();
+        dx[PX] = x[VX];
+        dx[PY] = x[VX + 1];
+        dx[PZ] = x[VZ];
+        dx[VX] = a_fwd * co - a_left * s - c.drag * x[VX];
+        dx[VX + 1] = a_fwd * s + a_left * co - c.drag * x[VX + 1];
+        dx[VZ] = (climb_t - x[VZ]) / c.climb_tau;
+        dx[ROLL] = (roll_t - x[ROLL]) / c.attitude_tau;
+        dx[PITCH] = (pitch_t - x[PITCH]) / c.attitude_tau;
+        dx[YAW] = x[YAW_RATE];
+        dx[YAW_RATE] = (rate_t - x[YAW_RATE]) / c.yaw_tau;
+        dx
+    }
+
+    /// Advances the state to time `t` (seconds; earlier times are ignored).
+    pub fn predict(&mut self, t: f64) {
+        let mut remaining = t - self.t;
+        if !(remaining.is_finite() && remaining > 0.0) {
+            return;
+        }
+        // Steps short against the fastest time constant.
+        while remaining > 1e-9 {
+            let dt = remaining.min(0.02);
+            remaining -= dt;
+            let f = self.jacobian(dt);
+            self.x += self.derivative(&self.x) * dt;
+            self.x[YAW] = wrap(self.x[YAW]);
+            let mut q = Cov::zeros();
+            let (ah, av) = self.config.accel_noise;
+            q[(VX, VX)] = ah * ah * dt;
+            q[(VX + 1, VX + 1)] = ah * ah * dt;
+            q[(VZ, VZ)] = av * av * dt;
+            let an = self.config.attitude_noise;
+            for i in [ROLL, PITCH, YAW_RATE] {
+                q[(i, i)] = an * an * dt;
+            }
+            q[(YAW, YAW)] = 0.01 * an * an * dt;
+            self.p = f * self.p * f.transpose() + q;
+            self.t += dt;
+            self.keep_physical();
+            self.history.push_back((self.t, self.x));
+        }
+        while self.history.front().is_some_and(|(h, _)| self.t - h > 2.0) {
+            self.history.pop_front();
+        }
+    }
+
+    /// Keeps the state physical whatever the measurements did: lean within twice the flight
+    /// controller's limit, speeds within what a multirotor reaches indoors. A state that went
+    /// non-finite is dropped: the filter waits for the next SLAM fix.
+    fn keep_physical(&mut self) {
+        if !(self.x.iter().all(|v| v.is_finite()) && self.p.iter().all(|v| v.is_finite())) {
+            let (t, input) = (self.t, self.input);
+            *self = Self::new(self.config.clone(), t, [0.0; 3], 0.0);
+            self.input = input;
+            return;
+        }
+        let lean = 2.0 * self.config.max_lean;
+        for i in [ROLL, PITCH] {
+            self.x[i] = self.x[i].clamp(-lean, lean);
+        }
+        for i in [VX, VX + 1, VZ] {
+            self.x[i] = self.x[i].clamp(-MAX_SPEED, MAX_SPEED);
+        }
+    }
+
+    /// ∂(x + f(x)·dt)/∂x by central differences.
+    fn jacobian(&self, dt: f64) -> Cov {
+        let mut f = Cov::identity();
+        for j in 0..N {
+            let h = 1e-6;
+            let (mut a, mut b) = (self.x, self.x);
+            a[j] += h;
+            b[j] -= h;
+            let d = (self.derivative(&a) - self.derivative(&b)) / (2.0 * h);
+            for i in 0..N {
+                f[(i, j)] += d[i] * dt;
+            }
+        }
+        f
+    }
+
+    /// The state at time `t`, interpolated in the history (the current state for `t` now or
+    /// later); `None` before the history.
+    fn state_at(&self, t: f64) -> Option<State> {
+        if t >= self.t - 1e-6 {
+            return Some(self.x);
+        }
+        let after = self.history.iter().position(|(h, _)| *h >= t)?;
+        let (t1, x1) = self.history[after];
+        let Some(&(t0, x0)) = after.checked_sub(1).and_then(|i| self.history.get(i)) else {
+            return (t1 - t < 1e-6).then_some(x1);
+        };
+        let a = ((t - t0) / (t1 - t0).max(1e-9)).clamp(0.0, 1.0);
+        let mut x = x0 + (x1 - x0) * a;
+        x[YAW] = wrap(x0[YAW] + wrap(x1[YAW] - x0[YAW]) * a);
+        Some(x)
+    }
+
+    /// A measurement of some state components: rows of `h` pick them, `z` the values, `r` the
+    /// variances, `angular` which rows are angles; taken at time `t`.
+    fn update<const M: usize>(
+        &mut self,
+        t: f64,
+        rows: [usize; M],
+        z: [f64; M],
+        r: [f64; M],
+        angular: [bool; M],
+        force: bool,
+    ) -> Update {
+        if !(t.is_finite() && z.iter().all(|v| v.is_finite())) {
+            return Update::Ignored;
+        }
+        let Some(then) = self.state_at(t) else {
+            return Update::Ignored;
+        };
+        let mut h = SMatrix::<f64, M, N>::zeros();
+        let mut y = SVector::<f64, M>::zeros();
+        let mut rm = SMatrix::<f64, M, M>::zeros();
+        for k in 0..M {
+            h[(k, rows[k])] = 1.0;
+            let d = z[k] - then[rows[k]];
+            y[k] = if angular[k] { wrap(d) } else { d };
+            rm[(k, k)] = r[k];
+        }
+        let s = h * self.p * h.transpose() + rm;
+        let Some(s_inv) = s.try_inverse() else {
+            return Update::Ignored;
+        };
+        let nis = (y.transpose() * s_inv * y)[(0, 0)];
+        if !force && nis > self.config.gate_chi2 * M as f64 {
+            self.outliers += 1;
+            return Update::Outlier;
+        }
+        let k = self.p * h.transpose() * s_inv;
+        self.x += k * y;
+        self.x[YAW] = wrap(self.x[YAW]);
+        let i_kh = Cov::identity() - k * h;
+        // Joseph form: stays symmetric and positive.
+        self.p = i_kh * self.p * i_kh.transpose() + k * rm * k.transpose();
+        self.keep_physical();
+        Update::Applied
+    }
+
+    /// A body pose from SLAM (position and yaw), captured at time `t`.
+    pub fn update_slam(&mut self, t: f64, position: [f64; 3], yaw: f64) -> Update {
+        let (sp, sy) = (
+            self.config.slam_position_sigma.powi(2),
+            self.config.slam_yaw_sigma.powi(2),
+        );
+        // Never gated: the SLAM's corrections after a loop closure are real jumps, and a
+        // filter that refused them would fly on its own drift from then on.
+        let u = self.update(
+            t,
+            [PX, PY, PZ, YAW],
+            [position[0], position[1], position[2], yaw],
+            [sp, sp, sp, sy],
+            [false, false, false, true],
+            true,
+        );
+        if u == Update::Applied {
+            self.fixed = true;
+        }
+        u
+    }
+
+    /// The IMU heading.
+    pub fn update_heading(&mut self, t: f64, yaw: f64) -> Update {
+        let r = self.config.heading_sigma.powi(2);
+        self.update(t, [YAW], [yaw], [r], [true], false)
+    }
+
+    /// The rangefinder's height above the floor.
+    pub fn update_height(&mut self, t: f64, height: f64) -> Update {
+        let r = self.config.height_sigma.powi(2);
+        self.update(t, [PZ], [height], [r], [false], false)
+    }
+
+    /// The flight controller's roll and pitch.
+    pub fn update_attitude(&mut self, t: f64, roll: f64, pitch: f64) -> Update {
+        let r = self.config.attitude_sigma.powi(2);
+        self.update(t, [ROLL, PITCH], [roll, pitch], [r, r], [true, true], false)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The same model as the filter, integrated finely: the truth to compare with.
+    fn truth_run(config: &EkfConfig, input: Input, seconds: f64) -> State {
+        let mut e = Ekf::new(config.clone(), 0.0, [0.0, 0.0, 1.0], 0.3);
+        e.set_input(input);
+        let mut t = 0.0;
+        while t < seconds {
+            t += 0.001;
+            e.x += e.derivative(&e.x) * 0.001;
+        }
+        e.x
+    }
+
+    #[test]
+    fn forward_stick_accelerates_to_the_drag_limited_speed() {
+        let config = EkfConfig::default();
+        let input = Input {
+            pitch: 0.5,
+            ..Input::default()
+        };
+        let x = truth_run(&config, input, 15.0);
+        // Lean (0.5 − 0.05)/0.95 of 20°, speed g·tan(lean)/drag along the heading 0.3 rad.
+        let lean = (0.45 / 0.95) * 20f64.to_radians();
+        let speed = G * lean.tan() / config.drag;
+        assert!((x[PITCH] - lean).abs() < 1e-6);
+        assert!((x[VX].hypot(x[VX + 1]) - speed).abs() < 0.01, "{}", x[VX]);
+        assert!((x[VX + 1].atan2(x[VX]) - 0.3).abs() < 1e-3);
+    }
+
+    #[test]
+    fn slam_fixes_track_a_moving_vehicle_and_dead_reckoning_bridges_a_gap() {
+        let config = EkfConfig::default();
+        let input = Input {
+            pitch: 0.3,
+            yaw: -0.2,
+            ..Input::default()
+        };
+        // Truth: the model itself, finely integrated, sampled every 0.1 s.
+        let mut truth = Ekf::new(config.clone(), 0.0, [0.0, 0.0, 1.0], 0.0);
+        truth.set_input(input);
+        let mut ekf = Ekf::new(config.clone(), 0.0, [0.5, -0.5, 1.0], 0.2);
+        ekf.set_input(input);
+        assert!(ekf.valid_estimate().is_none(), "no fix yet");
+        for step in 1..=100 {
+            let t = step as f64 * 0.1;
+            while truth.t < t - 1e-9 {
+                let dt = 0.001;
+                truth.x += truth.derivative(&truth.x) * dt;
+                truth.t += dt;
+            }
+            ekf.predict(t);
+            // Camera fixes for 6 s, then none (tracking lost) for 1 s, then fixes again.
+            if !(6.0..7.0).contains(&t) {
+                ekf.update_slam(t, [truth.x[PX], truth.x[PY], truth.x[PZ]], truth.x[YAW]);
+            }
+            ekf.update_heading(t, truth.x[YAW]);
+            if (6.0..7.0).contains(&t) {
+                let e = ekf.valid_estimate().expect("a 1 s gap stays within bounds");
+                let err = (e.position[0] - truth.x[PX]).hypot(e.position[1] - truth.x[PY]);
+                assert!(err < 0.15, "dead reckoning drifted {err:.3} m at {t:.1} s");
+            }
+        }
+        let e = ekf.valid_estimate().expect("valid");
+        let err = (e.position[0] - truth.x[PX]).hypot(e.position[1] - truth.x[PY]);
+        assert!(err < 0.02, "{err}");
+        let v_err = (e.velocity[0] - truth.x[VX]).hypot(e.velocity[1] - truth.x[VX + 1]);
+        assert!(v_err < 0.1, "velocity {v_err}");
+    }
+
+    #[test]
+    fn yaw_spikes_and_tables_under_the_sonar_are_gated() {
+        let mut ekf = Ekf::new(EkfConfig::default(), 0.0, [1.0, 1.0, 1.0], 0.5);
+        ekf.update_slam(0.0, [1.0, 1.0, 1.0], 0.5);
+        for k in 1..20 {
+            let t = k as f64 * 0.1;
+            ekf.predict(t);
+            ekf.update_slam(t, [1.0, 1.0, 1.0], 0.5);
+            assert_eq!(ekf.update_heading(t, 0.5), Update::Applied);
+            assert_eq!(ekf.update_height(t, 1.0), Update::Applied);
+        }
+        // A 60° yaw spike, a 0.7 m table.
+        assert_eq!(ekf.update_heading(2.0, 0.5 + 1.05), Update::Outlier);
+        assert_eq!(ekf.update_height(2.0, 0.3), Update::Outlier);
+        assert_eq!(ekf.outliers(), 2);
+        let e = ekf.estimate();
+        assert!((e.attitude[2] - 0.5).abs() < 0.01 && (e.position[2] - 1.0).abs() < 0.01);
+    }
+
+    #[test]
+    fn a_late_fix_is_compared_with_the_state_when_it_was_taken() {
+        let config = EkfConfig::default();
+        let mut ekf = Ekf::new(config, 0.0, [0.0, 0.0, 1.0], 0.0);
+        ekf.update_slam(0.0, [0.0, 0.0, 1.0], 0.0);
+        ekf.set_input(Input {
+            pitch: 0.6,
+            ..Input::default()
+        });
+        for k in 1..=30 {
+            ekf.predict(k as f64 * 0.1);
+            ekf.update_slam(k as f64 * 0.1, ekf.estimate().position, 0.0);
+        }
+        let before = ekf.estimate().position[0];
+        // A fix of where the vehicle was 0.3 s ago, agreeing with the filter then: no jump back.
+        let then = ekf.state_at(2.7).expect("in the history");
+        ekf.update_slam(2.7, [then[PX], then[PY], then[PZ]], then[YAW]);
+        assert!((ekf.estimate().position[0] - before).abs() < 0.01);
+    }
+
+    #[test]
+    fn without_fixes_the_estimate_becomes_invalid() {
+        let mut ekf = Ekf::new(EkfConfig::default(), 0.0, [0.0, 0.0, 1.0], 0.0);
+        ekf.update_slam(0.0, [0.0, 0.0, 1.0], 0.0);
+        assert!(ekf.valid_estimate().is_some());
+        ekf.predict(30.0);
+        assert!(ekf.valid_estimate().is_none());
+    }
+
+    #[test]
+    fn bad_measurements_and_wild_attitudes_leave_a_finite_physical_state() {
+        let config = EkfConfig::default();
+        let mut ekf = Ekf::new(config.clone(), 0.0, [0.0, 0.0, 1.0], 0.0);
+        ekf.update_slam(0.0, [0.0, 0.0, 1.0], 0.0);
+        assert_eq!(
+            ekf.update_slam(0.1, [f64::NAN, 0.0, 1.0], 0.0),
+            Update::Ignored
+        );
+        assert_eq!(ekf.update_height(0.1, f64::INFINITY), Update::Ignored);
+        // A flight controller reporting a lean of 80° (a crash, or a corrupt sample) must not
+        // throw the filter to infinity: lean and speed stay bounded.
+        for k in 1..=100 {
+            let t = f64::from(k) * 0.1;
+            ekf.set_input(Input {
+                pitch: 1.0,
+                ..Input::default()
+            });
+            ekf.predict(t);
+            ekf.update_attitude(t, 0.0, 80f64.to_radians());
+        }
+        let e = ekf.estimate();
+        assert!(e.attitude[1].abs() <= 2.0 * config.max_lean + 1e-9, "{e:?}");
+        assert!(e.velocity.iter().all(|v| v.abs() <= MAX_SPEED), "{e:?}");
+        assert!(e.position.iter().all(|v| v.is_finite()), "{e:?}");
+    }
+}

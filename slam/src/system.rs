@@ -1,0 +1,1577 @@
+//! One multi-robot RGB-D SLAM (thesis 000 §4.5, extended): every camera of every robot feeds
+//! **one** pose graph of keyframes.
+//!
+//! * **Tracking**: each frame is registered against its robot's reference keyframe (guided by a
+//!   constant-velocity prediction), else against the previous frame, else — relocalising —
+//!   against the robot's recent keyframes, keyframes near the last known or predicted pose, and
+//!   keyframes that look alike ([`PlaceIndex`]). A robot whose frames cannot be registered is
+//!   lost: its pose is invalid until it relocalises.
+//! * **Keyframes** (graph nodes, each with its robot id) when the camera has moved far enough
+//!   from the reference; each is linked to the reference and to the robot's previous keyframes,
+//!   and to **loop-closure candidates** of any robot: keyframes near its estimated pose, verified
+//!   geometrically, and kept only if the correction they imply is plausible.
+//! * **Coordinate frames**: robots with a known start map in the map frame from the start; a robot
+//!   whose start is unknown maps in a frame of its own (gravity-aligned, floor at z = 0, heading
+//!   from its IMU if it has one) until two agreeing verified matches with another frame's
+//!   keyframes anchor it there; then its whole trajectory moves into that frame.
+//! * **Side sensors**: the IMU heading and the rangefinder height become priors on the keyframes'
+//!   yaw and height (spikes gated against the visual estimate), so the graph does not drift in
+//!   the directions the vehicle can measure.
+//! * **Back end**: each frame's graph is optimised (Levenberg–Marquardt with faer's sparse
+//!   Cholesky, Huber kernel) on a background thread whenever a loop closes or priors accumulate;
+//!   loop closures that still disagree afterwards are switched off. Poses are read at any moment
+//!   without waiting: a robot's pose is kept relative to its reference keyframe, so it follows
+//!   every correction.
+//! * **Map**: keyframes of the map frame are cast into a [`LiveMap`], rebuilt in the background
+//!   when an optimisation moves them.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::sync::mpsc::{Receiver, Sender, TryRecvError, channel};
+use std::thread::JoinHandle;
+
+use image::GrayImage;
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+
+use crate::dataset::Pinhole;
+use crate::frontend::{FrontendConfig, Observation, Registration, observe, register};
+use crate::livemap::{LiveMap, MapHandle, NodeCloud, RebuildStatus};
+use crate::occupancy::{DepthImage, OccupancyConfig, depth_cloud};
+use crate::optimize::{Kernel, Options, Report, optimize};
+use crate::place::PlaceIndex;
+use crate::posegraph::{Edge, Graph, Pose, vertex_id};
+use crate::trajectory::Stamped;
+
+/// SLAM settings.
+#[derive(Debug, Clone)]
+pub struct SlamConfig {
+    /// Features and pairwise registration.
+    pub frontend: FrontendConfig,
+    /// A new keyframe after this much translation from the reference, metres…
+    pub keyframe_translation: f64,
+    /// …or this much rotation, radians.
+    pub keyframe_rotation: f64,
+    /// A motion larger than this between consecutive frames is a wrong registration, metres…
+    pub max_frame_translation: f64,
+    /// …or radians.
+    pub max_frame_rotation: f64,
+    /// Each keyframe is also registered against this many earlier keyframes of its robot.
+    pub recent_links: usize,
+    /// Loop-closure candidates lie within this distance of the new keyframe, metres…
+    pub loop_radius: f64,
+    /// …and look within this angle of its direction, radians.
+    pub loop_angle: f64,
+    /// At most this many loop-closure candidates are verified per keyframe.
+    pub loop_candidates: usize,
+    /// Keyframes of the robot's own last this-many are not loop-closure candidates.
+    pub loop_skip_recent: usize,
+    /// A loop closure needs this many inliers.
+    pub loop_min_inliers: usize,
+    /// A loop closure may correct the current estimate by at most this much, metres…
+    pub loop_max_correction: f64,
+    /// …and radians.
+    pub loop_max_correction_angle: f64,
+    /// Keyframes of other coordinate frames that look alike, verified per keyframe (merging).
+    pub place_candidates: usize,
+    /// Candidates tried per frame while relocalising.
+    pub relocalisation_candidates: usize,
+    /// A relocalisation needs this many inliers.
+    pub relocalisation_min_inliers: usize,
+    /// Guided matching while relocalising searches this far around a point's predicted
+    /// position, pixels (the prediction is poorer than while tracking).
+    pub relocalisation_search_px: f32,
+    /// Standard deviation of an unrefined registration with 100 inliers: metres and radians.
+    pub link_sigma: (f64, f64),
+    /// A refined registration's information is its Hessian times this (matching errors are not
+    /// independent, so the Hessian is overconfident).
+    pub link_information_scale: f64,
+    /// Standard deviation of the IMU heading prior, radians (`None`: headings unused).
+    pub heading_sigma: Option<f64>,
+    /// Standard deviation of the rangefinder height prior, metres (`None`: heights unused).
+    pub height_sigma: Option<f64>,
+    /// A heading further than this from the visual estimate is a spike, radians.
+    pub heading_gate: f64,
+    /// A height further than this from the visual estimate is not the floor, metres.
+    pub height_gate: f64,
+    /// Two frame-to-frame anchorings agree within this (metres, radians) to merge frames.
+    pub merge_agreement: (f64, f64),
+    /// Optimise after this many keyframes with priors even without a loop closure.
+    pub optimise_every: usize,
+    /// After optimisation, loop closures with χ² above this are switched off.
+    pub loop_reject_chi2: f64,
+    /// Optimiser settings.
+    pub optimiser: Options,
+    /// Optimise on a background thread (the default) or inline, deterministically.
+    pub background: bool,
+    /// Mapping only: every frame carries its camera pose (ground truth, motion capture) and no
+    /// tracking is done.
+    pub known_poses: bool,
+    /// The occupancy map.
+    pub occupancy: OccupancyConfig,
+    /// Rebuild the map when an optimisation moves a keyframe by more than this, metres…
+    pub rebuild_translation: f64,
+    /// …or radians.
+    pub rebuild_rotation: f64,
+}
+
+impl Default for SlamConfig {
+    fn default() -> Self {
+        Self {
+            frontend: FrontendConfig::default(),
+            keyframe_translation: 0.15,
+            keyframe_rotation: 12f64.to_radians(),
+            max_frame_translation: 0.5,
+            max_frame_rotation: 45f64.to_radians(),
+            recent_links: 2,
+            loop_radius: 2.0,
+            loop_angle: 50f64.to_radians(),
+            loop_candidates: 3,
+            loop_skip_recent: 8,
+            loop_min_inliers: 25,
+            loop_max_correction: 1.0,
+            loop_max_correction_angle: 20f64.to_radians(),
+            place_candidates: 2,
+            relocalisation_candidates: 6,
+            relocalisation_min_inliers: 25,
+            relocalisation_search_px: 60.0,
+            link_sigma: (0.01, 0.5f64.to_radians()),
+            link_information_scale: 0.05,
+            heading_sigma: Some(2f64.to_radians()),
+            height_sigma: Some(0.03),
+            heading_gate: 10f64.to_radians(),
+            height_gate: 0.3,
+            merge_agreement: (0.2, 5f64.to_radians()),
+            optimise_every: 10,
+            loop_reject_chi2: 100.0,
+            optimiser: Options {
+                kernel: Kernel::Huber(3.5),
+                max_iterations: 30,
+                relative_tolerance: 1e-6,
+                ..Options::default()
+            },
+            background: true,
+            known_poses: false,
+            occupancy: OccupancyConfig {
+                pixel_step: 6,
+                ..OccupancyConfig::default()
+            },
+            rebuild_translation: 0.03,
+            rebuild_rotation: 1f64.to_radians(),
+        }
+    }
+}
+
+/// One robot's camera mounting and, where known, where it starts.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RobotSetup {
+    /// The camera's optical frame on the body (body: x forward, y left, z up).
+    pub body_from_camera: Isometry3<f64>,
+    /// The body's pose in the map at the first frame (on the floor), when known.
+    pub start: Option<Isometry3<f64>>,
+}
+
+/// One RGB-D frame of one robot, with what its vehicle measured at the same time.
+#[derive(Debug, Clone)]
+pub struct Frame {
+    /// The robot (index into the setups given to [`Slam::new`]).
+    pub robot: usize,
+    /// Capture time, seconds.
+    pub stamp: f64,
+    /// The colour image in grey.
+    pub grey: GrayImage,
+    /// Depth, row-major, same size as `grey`, in units of `depth_scale`.
+    pub depth: Vec<u16>,
+    /// Metres per depth unit.
+    pub depth_scale: f64,
+    /// Intrinsics.
+    pub camera: Pinhole,
+    /// The body's heading from its IMU, radians (+ anticlockwise), if it has one.
+    pub heading: Option<f64>,
+    /// The body's height above the floor from its rangefinder, metres, if it has one.
+    pub height: Option<f64>,
+    /// A prediction of the body's pose in the robot's frame (e.g. from an EKF), used to
+    /// relocalise when tracking was lost.
+    pub predicted_body: Option<Isometry3<f64>>,
+    /// The camera's pose known from elsewhere (used, and required, in mapping-only mode:
+    /// [`SlamConfig::known_poses`]).
+    pub known_camera_pose: Option<Isometry3<f64>>,
+}
+
+/// What happened to one frame.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Tracking {
+    /// The robot's first keyframe: its map starts here.
+    Started,
+    /// Registered against its reference keyframe or the previous frame.
+    Tracked {
+        /// Inliers of the registration.
+        inliers: usize,
+    },
+    /// Registered again after being lost.
+    Relocalised {
+        /// The keyframe it was registered against.
+        keyframe: usize,
+    },
+    /// Not registered: the pose is invalid until the robot relocalises.
+    Lost(String),
+}
+
+/// The outcome of [`Slam::process`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrameReport {
+    /// Tracking.
+    pub tracking: Tracking,
+    /// The keyframe this frame became, if it did.
+    pub keyframe: Option<usize>,
+    /// Loop closures added with it.
+    pub loop_closures: usize,
+    /// Coordinate frames merged because of it: (kept, absorbed).
+    pub merged: Option<(usize, usize)>,
+}
+
+/// A robot's tracking state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RobotState {
+    /// No frame processed yet.
+    Waiting,
+    /// The pose is valid.
+    Tracking,
+    /// Tracking was lost: the pose is invalid.
+    Lost,
+}
+
+impl RobotState {
+    /// Lower-case name for displays.
+    pub fn name(self) -> &'static str {
+        match self {
+            RobotState::Waiting => "waiting",
+            RobotState::Tracking => "tracking",
+            RobotState::Lost => "lost",
+        }
+    }
+}
+
+/// A robot's current estimate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RobotEstimate {
+    /// Tracking state.
+    pub state: RobotState,
+    /// The camera's pose in the robot's coordinate frame; `None` unless tracking.
+    pub frame_from_camera: Option<Isometry3<f64>>,
+    /// The body's pose in the robot's coordinate frame; `None` unless tracking.
+    pub frame_from_body: Option<Isometry3<f64>>,
+    /// Whether the robot's frame is the map frame (its pose is a map pose).
+    pub in_map: bool,
+    /// Time of the last frame processed, seconds.
+    pub stamp: f64,
+    /// Frames processed.
+    pub frames: usize,
+    /// Frames that could not be tracked.
+    pub lost_frames: usize,
+    /// Keyframes in the graph.
+    pub keyframes: usize,
+}
+
+impl RobotEstimate {
+    /// The body's pose in the map, when tracking in the map frame.
+    pub fn map_from_body(&self) -> Option<Isometry3<f64>> {
+        self.frame_from_body.filter(|_| self.in_map)
+    }
+
+    /// The camera's pose in the map, when tracking in the map frame.
+    pub fn map_from_camera(&self) -> Option<Isometry3<f64>> {
+        self.frame_from_camera.filter(|_| self.in_map)
+    }
+}
+
+/// Counters for displays and logs.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct SlamStats {
+    /// Keyframes.
+    pub keyframes: usize,
+    /// Loop closures in the graph (switched-off ones excluded).
+    pub loop_closures: usize,
+    /// Loop closures switched off by the optimiser's check.
+    pub rejected_loop_closures: usize,
+    /// Coordinate frames merged.
+    pub merges: usize,
+    /// Optimisations applied.
+    pub optimisations: usize,
+    /// Map rebuilds swapped in.
+    pub map_rebuilds: u64,
+    /// Wall time of the last optimisation, seconds.
+    pub last_optimisation_s: f64,
+}
+
+/// A frame that cannot be processed at all.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SlamError {
+    /// The frame names a robot the SLAM was not set up with.
+    #[error("frame of robot {robot}, but the SLAM was set up for {robots} robot(s)")]
+    UnknownRobot {
+        /// The robot in the frame.
+        robot: usize,
+        /// Robots set up.
+        robots: usize,
+    },
+    /// Depth and colour differ in size.
+    #[error("depth image has {depth} pixels, the colour image {colour}")]
+    SizeMismatch {
+        /// Depth pixels.
+        depth: usize,
+        /// Colour pixels.
+        colour: usize,
+    },
+}
+
+#[derive(Debug, Clone)]
+struct Node {
+    robot: usize,
+    stamp: f64,
+    frame: usize,
+    /// Camera to its coordinate frame.
+    pose: Isometry3<f64>,
+    /// The keyframe it was created from (corrections propagate along this).
+    parent: Option<usize>,
+    observation: Arc<Observation>,
+    cloud: Arc<Vec<Point3<f32>>>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum LinkKind {
+    Odometry,
+    Loop,
+}
+
+#[derive(Debug, Clone)]
+struct Link {
+    a: usize,
+    b: usize,
+    a_from_b: Isometry3<f64>,
+    info: Vec<f64>,
+    kind: LinkKind,
+    alive: bool,
+}
+
+#[derive(Debug, Clone)]
+struct Prior {
+    node: usize,
+    /// The measured camera pose (only the informative directions matter).
+    z: Isometry3<f64>,
+    info: Vec<f64>,
+    /// A start prior ties a robot to its coordinate frame's origin; dropped when the frame merges.
+    start: bool,
+    alive: bool,
+}
+
+/// The previous frame of a robot, kept as a short-baseline fallback.
+#[derive(Debug, Clone)]
+struct Previous {
+    observation: Arc<Observation>,
+    reference: usize,
+    reference_from_camera: Isometry3<f64>,
+}
+
+#[derive(Debug, Clone)]
+struct Robot {
+    setup: RobotSetup,
+    frame: usize,
+    state: RobotState,
+    /// The reference keyframe and the camera relative to it (the last known pose while lost).
+    reference: Option<usize>,
+    reference_from_camera: Isometry3<f64>,
+    previous: Option<Previous>,
+    /// Previous camera from current camera, for the constant-velocity prediction.
+    velocity: Option<Isometry3<f64>>,
+    nodes: Vec<usize>,
+    stamp: f64,
+    frames: usize,
+    lost_frames: usize,
+    /// Every tracked frame: time, reference keyframe, camera relative to it.
+    track: Vec<(f64, usize, Isometry3<f64>)>,
+}
+
+/// One optimisation of one coordinate frame's graph.
+struct Job {
+    frame: usize,
+    epoch: u64,
+    nodes: Vec<usize>,
+    graph: Graph<Isometry3<f64>>,
+    /// Graph edge index → link id, for the loop closures.
+    loops: Vec<(usize, usize)>,
+}
+
+struct Done {
+    frame: usize,
+    epoch: u64,
+    nodes: Vec<usize>,
+    result: Result<(Vec<Isometry3<f64>>, Report), String>,
+    rejected: Vec<usize>,
+}
+
+/// Runs a job: optimise, then flag the loop closures that still disagree.
+fn run_job(mut job: Job, options: &Options, reject_chi2: f64) -> Done {
+    let result = optimize(&mut job.graph, options);
+    let mut rejected = vec![];
+    if result.is_ok() {
+        let mut e = [0.0; 6];
+        for &(edge, link) in &job.loops {
+            let ed = &job.graph.edges[edge];
+            Isometry3::error(
+                &job.graph.poses[ed.i],
+                &job.graph.poses[ed.j],
+                &ed.z,
+                &mut e,
+            );
+            if crate::posegraph::quad(&ed.info, &e, 6) > reject_chi2 {
+                rejected.push(link);
+            }
+        }
+    }
+    Done {
+        frame: job.frame,
+        epoch: job.epoch,
+        nodes: job.nodes,
+        result: result
+            .map(|r| (job.graph.poses, r))
+            .map_err(|e| e.to_string()),
+        rejected,
+    }
+}
+
+/// The background optimiser: one thread, one job at a time.
+struct Worker {
+    jobs: Sender<Job>,
+    done: Receiver<Done>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl Worker {
+    fn start(options: Options, reject_chi2: f64) -> Option<Self> {
+        let (jobs, job_rx) = channel::<Job>();
+        let (done_tx, done) = channel();
+        let thread = std::thread::Builder::new()
+            .name("slam-optimiser".into())
+            .spawn(move || {
+                for job in job_rx {
+                    if done_tx.send(run_job(job, &options, reject_chi2)).is_err() {
+                        return;
+                    }
+                }
+            })
+            .ok()?;
+        Some(Self {
+            jobs,
+            done,
+            thread: Some(thread),
+        })
+    }
+}
+
+impl Drop for Worker {
+    fn drop(&mut self) {
+        // Closing the job channel ends the thread after its current job.
+        let (dead, _) = channel();
+        drop(std::mem::replace(&mut self.jobs, dead));
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+/// The multi-robot SLAM.
+pub struct Slam {
+    config: SlamConfig,
+    robots: Vec<Robot>,
+    nodes: Vec<Node>,
+    links: Vec<Link>,
+    priors: Vec<Prior>,
+    /// Per coordinate frame: epoch (bumped when a merge changes it), and whether it needs
+    /// optimising.
+    frames: Vec<(u64, bool)>,
+    /// Keyframes with priors since the frame's last optimisation.
+    since_optimised: Vec<usize>,
+    /// Anchoring candidates between two frames: (kept, absorbed) → kept_from_absorbed.
+    merge_votes: HashMap<(usize, usize), Vec<Isometry3<f64>>>,
+    place: PlaceIndex,
+    worker: Option<Worker>,
+    in_flight: bool,
+    map: LiveMap,
+    stats: SlamStats,
+}
+
+/// Information matrix (6×6, row-major) with isotropic translation and rotation weights.
+fn isotropic_info(sigma_t: f64, sigma_r: f64) -> Vec<f64> {
+    let mut info = vec![0.0; 36];
+    for k in 0..3 {
+        info[k * 6 + k] = 1.0 / (sigma_t * sigma_t);
+        info[(k + 3) * 6 + k + 3] = 1.0 / (sigma_r * sigma_r);
+    }
+    info
+}
+
+/// The body's yaw of a camera pose.
+fn body_yaw(frame_from_camera: &Isometry3<f64>, camera_from_body: &Isometry3<f64>) -> f64 {
+    let body = frame_from_camera * camera_from_body;
+    let x = body.rotation * Vector3::x();
+    x.y.atan2(x.x)
+}
+
+fn wrap(a: f64) -> f64 {
+    (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI
+}
+
+impl Slam {
+    /// A SLAM for the robots `setups` (robot k is `setups[k]`). Robots with a known start share
+    /// the map frame; each other robot starts in a frame of its own — except that, when no
+    /// start is known at all, robot 0's frame is the map.
+    pub fn new(config: SlamConfig, setups: Vec<RobotSetup>) -> Self {
+        let any_known = setups.iter().any(|s| s.start.is_some());
+        let mut next_frame = 1;
+        let robots: Vec<Robot> = setups
+            .into_iter()
+            .enumerate()
+            .map(|(k, setup)| {
+                let frame = if setup.start.is_some() || (!any_known && k == 0) {
+                    0
+                } else {
+                    next_frame += 1;
+                    next_frame - 1
+                };
+                Robot {
+                    setup,
+                    frame,
+                    state: RobotState::Waiting,
+                    reference: None,
+                    reference_from_camera: Isometry3::identity(),
+                    previous: None,
+                    velocity: None,
+                    nodes: vec![],
+                    stamp: 0.0,
+                    frames: 0,
+                    lost_frames: 0,
+                    track: vec![],
+                }
+            })
+            .collect();
+        let worker = if config.background {
+            Worker::start(config.optimiser.clone(), config.loop_reject_chi2)
+        } else {
+            None
+        };
+        Self {
+            map: LiveMap::new(config.occupancy.clone()),
+            config,
+            frames: vec![(0, false); next_frame],
+            since_optimised: vec![0; next_frame],
+            robots,
+            nodes: vec![],
+            links: vec![],
+            priors: vec![],
+            merge_votes: HashMap::new(),
+            place: PlaceIndex::new(),
+            worker,
+            in_flight: false,
+            stats: SlamStats::default(),
+        }
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &SlamConfig {
+        &self.config
+    }
+
+    /// Number of robots.
+    pub fn robots(&self) -> usize {
+        self.robots.len()
+    }
+
+    /// A handle on the occupancy map of the map frame, for readers on other threads.
+    pub fn map(&self) -> MapHandle {
+        self.map.handle()
+    }
+
+    /// Counters.
+    pub fn stats(&self) -> SlamStats {
+        SlamStats {
+            keyframes: self.nodes.len(),
+            loop_closures: self
+                .links
+                .iter()
+                .filter(|l| l.alive && l.kind == LinkKind::Loop)
+                .count(),
+            map_rebuilds: self.map.rebuilds(),
+            ..self.stats
+        }
+    }
+
+    /// Robot `k`'s current estimate.
+    pub fn estimate(&self, k: usize) -> Option<RobotEstimate> {
+        let r = self.robots.get(k)?;
+        let frame_from_camera = match (r.state, r.reference) {
+            (RobotState::Tracking, Some(n)) => Some(self.nodes[n].pose * r.reference_from_camera),
+            _ => None,
+        };
+        let camera_from_body = r.setup.body_from_camera.inverse();
+        Some(RobotEstimate {
+            state: r.state,
+            frame_from_body: frame_from_camera.map(|c| c * camera_from_body),
+            frame_from_camera,
+            in_map: r.frame == 0,
+            stamp: r.stamp,
+            frames: r.frames,
+            lost_frames: r.lost_frames,
+            keyframes: r.nodes.len(),
+        })
+    }
+
+    /// Every tracked frame of robot `k` (camera to its frame) at the current keyframe poses.
+    pub fn trajectory(&self, k: usize) -> Vec<Stamped> {
+        self.robots.get(k).map_or_else(Vec::new, |r| {
+            r.track
+                .iter()
+                .map(|&(t, n, rel)| Stamped {
+                    t,
+                    pose: self.nodes[n].pose * rel,
+                })
+                .collect()
+        })
+    }
+
+    /// Robot `k`'s keyframes (camera to its frame).
+    pub fn keyframe_trajectory(&self, k: usize) -> Vec<Stamped> {
+        self.robots.get(k).map_or_else(Vec::new, |r| {
+            r.nodes
+                .iter()
+                .map(|&n| Stamped {
+                    t: self.nodes[n].stamp,
+                    pose: self.nodes[n].pose,
+                })
+                .collect()
+        })
+    }
+
+    /// The pose graph of the map frame (vertex 0: the map's origin; robot k's keyframes carry
+    /// GTSAM-style ids with letter `b'a' + k`), for export as g2o.
+    pub fn graph(&self) -> Graph<Isometry3<f64>> {
+        self.build_job(0).graph
+    }
+
+    /// Processes one frame.
+    pub fn process(&mut self, frame: Frame) -> Result<FrameReport, SlamError> {
+        let k = frame.robot;
+        if k >= self.robots.len() {
+            return Err(SlamError::UnknownRobot {
+                robot: k,
+                robots: self.robots.len(),
+            });
+        }
+        let (w, h) = frame.grey.dimensions();
+        if frame.depth.len() != (w as usize) * (h as usize) {
+            return Err(SlamError::SizeMismatch {
+                depth: frame.depth.len(),
+                colour: (w as usize) * (h as usize),
+            });
+        }
+        self.poll();
+        if self.config.known_poses {
+            let report = match frame.known_camera_pose {
+                Some(pose) => self.place_known(&frame, pose),
+                None => lost("mapping-only mode needs the camera's pose with every frame".into()),
+            };
+            let r = &mut self.robots[k];
+            r.frames += 1;
+            r.stamp = frame.stamp;
+            if let Some(n) = r.reference {
+                r.track.push((frame.stamp, n, r.reference_from_camera));
+            }
+            return Ok(report);
+        }
+        let observation = Arc::new(observe(
+            &frame.grey,
+            &frame.depth,
+            frame.depth_scale,
+            &frame.camera,
+            &self.config.frontend,
+        ));
+        let robot = &mut self.robots[k];
+        robot.frames += 1;
+        robot.stamp = frame.stamp;
+        let report = if robot.reference.is_none() {
+            self.start(&frame, observation)
+        } else {
+            self.track(&frame, observation)
+        };
+        if let Tracking::Lost(_) = report.tracking {
+            let r = &mut self.robots[k];
+            r.lost_frames += 1;
+            r.state = if r.reference.is_some() {
+                RobotState::Lost
+            } else {
+                RobotState::Waiting
+            };
+            r.previous = None;
+            r.velocity = None;
+        } else if let Some(n) = self.robots[k].reference {
+            let r = &mut self.robots[k];
+            r.track.push((frame.stamp, n, r.reference_from_camera));
+        }
+        self.schedule();
+        Ok(report)
+    }
+
+    /// Waits for the background optimiser and the map rebuild to catch up (end of a run).
+    pub fn finish(&mut self) {
+        for _ in 0..20 {
+            self.schedule();
+            if !self.in_flight {
+                break;
+            }
+            if let Some(w) = &self.worker
+                && let Ok(done) = w.done.recv()
+            {
+                self.in_flight = false;
+                self.apply(done);
+            } else {
+                self.in_flight = false;
+            }
+        }
+        loop {
+            let nodes = &self.nodes;
+            let status = self.map.finish(|n| node_cloud(nodes, n));
+            if status != RebuildStatus::SwappedStale {
+                break;
+            }
+            self.rebuild_map();
+        }
+    }
+
+    /// Mapping only: the frame's known pose; a keyframe when it moved far enough.
+    fn place_known(&mut self, frame: &Frame, pose: Isometry3<f64>) -> FrameReport {
+        let k = frame.robot;
+        let reference = self.robots[k].reference;
+        let relative = reference.map(|n| self.nodes[n].pose.inverse() * pose);
+        let moved = relative.is_none_or(|d| {
+            d.translation.vector.norm() > self.config.keyframe_translation
+                || d.rotation.angle() > self.config.keyframe_rotation
+        });
+        let mut keyframe = None;
+        if moved {
+            let empty = Arc::new(Observation {
+                keypoints: vec![],
+                descriptors: vec![],
+                points: vec![],
+                camera: frame.camera,
+            });
+            let n = self.add_node(frame, empty, pose, reference);
+            self.robots[k].reference = Some(n);
+            self.robots[k].reference_from_camera = Isometry3::identity();
+            keyframe = Some(n);
+        } else if let Some(d) = relative {
+            self.robots[k].reference_from_camera = d;
+        }
+        self.robots[k].state = RobotState::Tracking;
+        FrameReport {
+            tracking: if reference.is_none() {
+                Tracking::Started
+            } else {
+                Tracking::Tracked { inliers: 0 }
+            },
+            keyframe,
+            loop_closures: 0,
+            merged: None,
+        }
+    }
+
+    /// The robot's first keyframe, at its start.
+    fn start(&mut self, frame: &Frame, observation: Arc<Observation>) -> FrameReport {
+        let k = frame.robot;
+        if observation.len() < self.config.frontend.min_features {
+            return lost(format!(
+                "{} features with depth (at least {} needed) to start",
+                observation.len(),
+                self.config.frontend.min_features
+            ));
+        }
+        let r = &self.robots[k];
+        let start_body = r.setup.start.unwrap_or_else(|| {
+            // An own frame: level on the floor at the origin, facing the IMU's heading.
+            Isometry3::from_parts(
+                Translation3::identity(),
+                UnitQuaternion::from_euler_angles(0.0, 0.0, frame.heading.unwrap_or(0.0)),
+            )
+        });
+        let pose = start_body * r.setup.body_from_camera;
+        let n = self.add_node(frame, observation, pose, None);
+        self.priors.push(Prior {
+            node: n,
+            z: pose,
+            info: isotropic_info(1e-3, 1e-3),
+            start: true,
+            alive: true,
+        });
+        let r = &mut self.robots[k];
+        r.state = RobotState::Tracking;
+        r.reference = Some(n);
+        r.reference_from_camera = Isometry3::identity();
+        FrameReport {
+            tracking: Tracking::Started,
+            keyframe: Some(n),
+            loop_closures: 0,
+            merged: None,
+        }
+    }
+
+    fn track(&mut self, frame: &Frame, observation: Arc<Observation>) -> FrameReport {
+        let k = frame.robot;
+        let r = &self.robots[k];
+        let Some(reference) = r.reference else {
+            return lost("no reference keyframe".into());
+        };
+        let tracking = r.state == RobotState::Tracking;
+        let last_pose = self.nodes[reference].pose * r.reference_from_camera;
+        let camera_from_body = r.setup.body_from_camera.inverse();
+        let predicted = if tracking {
+            Some(r.velocity.map_or(last_pose, |v| last_pose * v))
+        } else {
+            // Lost: the caller's prediction, else where the robot was last seen, turned to the
+            // heading its IMU reads now (a hovering robot turns more than it moves).
+            let body_from_camera = r.setup.body_from_camera;
+            frame
+                .predicted_body
+                .map(|b| b * body_from_camera)
+                .or_else(|| {
+                    frame.heading.map(|psi| {
+                        let turn = wrap(psi - body_yaw(&last_pose, &camera_from_body));
+                        let about_z = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), turn);
+                        Isometry3::from_parts(last_pose.translation, about_z * last_pose.rotation)
+                    })
+                })
+        };
+        let frontend = &self.config.frontend;
+        let seed = r.frames as u64 ^ ((k as u64) << 40);
+        // 1. The reference keyframe, then the previous frame.
+        let mut found: Option<(Option<usize>, Registration)> = None;
+        let mut why = String::new();
+        if tracking {
+            let guess = predicted.map(|p| self.nodes[reference].pose.inverse() * p);
+            match register(
+                &self.nodes[reference].observation,
+                &observation,
+                guess.as_ref(),
+                frontend,
+                seed,
+            ) {
+                Ok(reg) => found = Some((Some(reference), reg)),
+                Err(e) => why = format!("keyframe: {e}"),
+            }
+            if found.is_none()
+                && let Some(p) = &r.previous
+            {
+                let prev_pose = self.nodes[p.reference].pose * p.reference_from_camera;
+                let guess = predicted.map(|q| prev_pose.inverse() * q);
+                match register(&p.observation, &observation, guess.as_ref(), frontend, seed) {
+                    Ok(reg) => {
+                        let via = Registration {
+                            reference_from_frame: p.reference_from_camera
+                                * reg.reference_from_frame,
+                            ..reg
+                        };
+                        found = Some((None, via));
+                    }
+                    Err(e) => why = format!("{why}; previous frame: {e}"),
+                }
+            }
+            if let Some((_, reg)) = &found {
+                let base = match found.as_ref().and_then(|(n, _)| *n) {
+                    Some(n) => self.nodes[n].pose,
+                    None => self.nodes[r.previous.as_ref().map_or(reference, |p| p.reference)].pose,
+                };
+                let motion = last_pose.inverse() * (base * reg.reference_from_frame);
+                let (t, a) = (motion.translation.vector.norm(), motion.rotation.angle());
+                if t > self.config.max_frame_translation || a > self.config.max_frame_rotation {
+                    why = format!(
+                        "implausible motion ({t:.2} m, {:.0}°) rejected",
+                        a.to_degrees()
+                    );
+                    found = None;
+                }
+            }
+        }
+        // 2. Relocalisation (or a reference slipping away): nearby and look-alike keyframes.
+        let mut relocalised = None;
+        if found.is_none() {
+            let around = predicted.unwrap_or(last_pose);
+            let wide = FrontendConfig {
+                search_radius_px: self.config.relocalisation_search_px,
+                ..frontend.clone()
+            };
+            for n in self.relocalisation_candidates(k, &around, &observation) {
+                let guess = predicted.map(|p| self.nodes[n].pose.inverse() * p);
+                match register(
+                    &self.nodes[n].observation,
+                    &observation,
+                    guess.as_ref(),
+                    &wide,
+                    seed,
+                ) {
+                    Ok(reg) if reg.inliers >= self.config.relocalisation_min_inliers => {
+                        let pose = self.nodes[n].pose * reg.reference_from_frame;
+                        // A registration far from a good prediction is a wrong match.
+                        let plausible = predicted.is_none_or(|p| {
+                            let d = p.inverse() * pose;
+                            d.translation.vector.norm() < 1.0 && d.rotation.angle() < 0.6
+                        });
+                        if plausible {
+                            found = Some((Some(n), reg));
+                            relocalised = Some(n);
+                            break;
+                        }
+                    }
+                    Ok(reg) => why = format!("{why}; keyframe {n}: only {} inliers", reg.inliers),
+                    Err(e) => why = format!("{why}; keyframe {n}: {e}"),
+                }
+            }
+        }
+        let Some((matched, reg)) = found else {
+            return lost(if why.is_empty() {
+                "no keyframe to relocalise against".into()
+            } else {
+                why
+            });
+        };
+        // The new pose, relative to a keyframe.
+        let r = &mut self.robots[k];
+        let (anchor, anchor_from_camera) = match matched {
+            Some(n) => (n, reg.reference_from_frame),
+            None => {
+                let p = r.previous.as_ref().map_or(reference, |p| p.reference);
+                (p, reg.reference_from_frame)
+            }
+        };
+        let pose = self.nodes[anchor].pose * anchor_from_camera;
+        let was_lost = r.state != RobotState::Tracking;
+        r.velocity = (!was_lost).then(|| last_pose.inverse() * pose);
+        r.state = RobotState::Tracking;
+        r.reference = Some(anchor);
+        r.reference_from_camera = anchor_from_camera;
+        r.previous = Some(Previous {
+            observation: observation.clone(),
+            reference: anchor,
+            reference_from_camera: anchor_from_camera,
+        });
+        let moved = anchor_from_camera.translation.vector.norm() > self.config.keyframe_translation
+            || anchor_from_camera.rotation.angle() > self.config.keyframe_rotation;
+        let slipping = matched.is_none() || matched != Some(reference);
+        let tracking_report = match relocalised {
+            Some(n) => Tracking::Relocalised { keyframe: n },
+            None => Tracking::Tracked {
+                inliers: reg.inliers,
+            },
+        };
+        if !(moved || slipping) {
+            return FrameReport {
+                tracking: tracking_report,
+                keyframe: None,
+                loop_closures: 0,
+                merged: None,
+            };
+        }
+        // A new keyframe, linked to the keyframe it was registered against.
+        let n = self.add_node(frame, observation, pose, Some(anchor));
+        self.link(
+            anchor,
+            n,
+            &Registration {
+                reference_from_frame: anchor_from_camera,
+                ..reg
+            },
+            LinkKind::Odometry,
+        );
+        let r = &mut self.robots[k];
+        r.reference = Some(n);
+        r.reference_from_camera = Isometry3::identity();
+        if let Some(p) = &mut r.previous {
+            p.reference = n;
+            p.reference_from_camera = Isometry3::identity();
+        }
+        self.link_recent(k, n, anchor);
+        let loops = self.close_loops(n);
+        let merged = self.anchor_frames(n);
+        self.add_priors(n, frame);
+        if loops > 0 || merged.is_some() {
+            self.frames[self.nodes[n].frame].1 = true;
+        }
+        FrameReport {
+            tracking: tracking_report,
+            keyframe: Some(n),
+            loop_closures: loops,
+            merged,
+        }
+    }
+
+    fn add_node(
+        &mut self,
+        frame: &Frame,
+        observation: Arc<Observation>,
+        pose: Isometry3<f64>,
+        parent: Option<usize>,
+    ) -> usize {
+        let k = frame.robot;
+        let (w, h) = frame.grey.dimensions();
+        let cloud = Arc::new(depth_cloud(
+            &DepthImage {
+                width: w as usize,
+                height: h as usize,
+                depth: &frame.depth,
+                depth_scale: frame.depth_scale,
+                intrinsics: [
+                    frame.camera.fx,
+                    frame.camera.fy,
+                    frame.camera.cx,
+                    frame.camera.cy,
+                ],
+            },
+            self.config.occupancy.pixel_step,
+            self.config.occupancy.max_range,
+        ));
+        let n = self.nodes.len();
+        self.place.add(n, &observation.descriptors);
+        let frame_id = self.robots[k].frame;
+        self.nodes.push(Node {
+            robot: k,
+            stamp: frame.stamp,
+            frame: frame_id,
+            pose,
+            parent,
+            observation,
+            cloud: cloud.clone(),
+        });
+        self.robots[k].nodes.push(n);
+        if frame_id == 0 {
+            self.map.insert(&NodeCloud {
+                node: n,
+                map_from_camera: pose,
+                cloud,
+            });
+        }
+        n
+    }
+
+    fn link(&mut self, a: usize, b: usize, reg: &Registration, kind: LinkKind) {
+        let info = match reg
+            .information
+            .filter(|_| self.config.link_information_scale > 0.0)
+        {
+            Some(h) => (h * self.config.link_information_scale)
+                .transpose()
+                .as_slice()
+                .to_vec(),
+            None => {
+                let scale = (100.0 / reg.inliers.max(1) as f64).sqrt().clamp(1.0, 3.0);
+                let (st, sr) = self.config.link_sigma;
+                isotropic_info(st * scale, sr * scale)
+            }
+        };
+        self.links.push(Link {
+            a,
+            b,
+            a_from_b: reg.reference_from_frame,
+            info,
+            kind,
+            alive: true,
+        });
+    }
+
+    /// Links a new keyframe to the robot's keyframes before its anchor (local constraints).
+    fn link_recent(&mut self, k: usize, n: usize, anchor: usize) {
+        let recent: Vec<usize> = self.robots[k]
+            .nodes
+            .iter()
+            .rev()
+            .copied()
+            .filter(|&m| m != n && m != anchor)
+            .take(self.config.recent_links)
+            .collect();
+        for m in recent {
+            let guess = self.nodes[m].pose.inverse() * self.nodes[n].pose;
+            if let Ok(reg) = register(
+                &self.nodes[m].observation,
+                &self.nodes[n].observation,
+                Some(&guess),
+                &self.config.frontend,
+                n as u64,
+            ) {
+                let d = guess.inverse() * reg.reference_from_frame;
+                if d.translation.vector.norm() < 0.1 && d.rotation.angle() < 0.1 {
+                    self.link(m, n, &reg, LinkKind::Odometry);
+                }
+            }
+        }
+    }
+
+    /// Loop closures from keyframe `n` to keyframes of its frame near it; returns how many.
+    fn close_loops(&mut self, n: usize) -> usize {
+        let node = &self.nodes[n];
+        let robot = &self.robots[node.robot];
+        let skip: Vec<usize> = robot
+            .nodes
+            .iter()
+            .rev()
+            .take(self.config.loop_skip_recent + 1)
+            .copied()
+            .collect();
+        let here = node.pose.translation.vector;
+        let axis = node.pose.rotation * Vector3::z();
+        let mut near: Vec<(f64, usize)> = self
+            .nodes
+            .iter()
+            .enumerate()
+            .filter(|(m, o)| {
+                o.frame == node.frame
+                    && !skip.contains(m)
+                    && (o.pose.rotation * Vector3::z()).angle(&axis) < self.config.loop_angle
+            })
+            .map(|(m, o)| ((o.pose.translation.vector - here).norm(), m))
+            .filter(|&(d, _)| d < self.config.loop_radius)
+            .collect();
+        near.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let linked: Vec<usize> = self
+            .links
+            .iter()
+            .filter(|l| l.b == n)
+            .map(|l| l.a)
+            .collect();
+        let chosen: Vec<usize> = near
+            .into_iter()
+            .map(|(_, m)| m)
+            .filter(|m| !linked.contains(m))
+            .take(self.config.loop_candidates)
+            .collect();
+        let mut added = 0;
+        for m in chosen {
+            let estimate = self.nodes[m].pose.inverse() * self.nodes[n].pose;
+            let Ok(reg) = register(
+                &self.nodes[m].observation,
+                &self.nodes[n].observation,
+                Some(&estimate),
+                &self.config.frontend,
+                (n as u64) << 20 | m as u64,
+            ) else {
+                continue;
+            };
+            if reg.inliers < self.config.loop_min_inliers {
+                continue;
+            }
+            let correction = estimate.inverse() * reg.reference_from_frame;
+            if correction.translation.vector.norm() > self.config.loop_max_correction
+                || correction.rotation.angle() > self.config.loop_max_correction_angle
+            {
+                tracing::debug!(
+                    from = m,
+                    to = n,
+                    "loop closure rejected: it would move the keyframe {:.2} m",
+                    correction.translation.vector.norm()
+                );
+                continue;
+            }
+            self.link(m, n, &reg, LinkKind::Loop);
+            added += 1;
+        }
+        added
+    }
+
+    /// Verifies look-alike keyframes of other coordinate frames; merges two frames once two
+    /// matches agree on how they relate. Returns (kept, absorbed) after a merge.
+    fn anchor_frames(&mut self, n: usize) -> Option<(usize, usize)> {
+        let frame = self.nodes[n].frame;
+        let others = self.nodes.iter().any(|o| o.frame != frame);
+        if !others || self.config.place_candidates == 0 {
+            return None;
+        }
+        let nodes = &self.nodes;
+        let candidates = self.place.query(
+            &nodes[n].observation.descriptors,
+            self.config.place_candidates,
+            |m| nodes[m].frame != frame,
+        );
+        for (m, _) in candidates {
+            let Ok(reg) = register(
+                &self.nodes[m].observation,
+                &self.nodes[n].observation,
+                None,
+                &self.config.frontend,
+                (n as u64) << 20 | m as u64,
+            ) else {
+                continue;
+            };
+            if reg.inliers < self.config.loop_min_inliers {
+                continue;
+            }
+            // How the two frames relate, from the match m ← n: F_m ← F_n.
+            let m_from_n = reg.reference_from_frame;
+            let fm_from_fn = self.nodes[m].pose * m_from_n * self.nodes[n].pose.inverse();
+            let fm = self.nodes[m].frame;
+            let (kept, absorbed, kept_from_absorbed) = if fm < frame {
+                (fm, frame, fm_from_fn)
+            } else {
+                (frame, fm, fm_from_fn.inverse())
+            };
+            // Both frames are level with the floor at z = 0: the relation is a turn about z and
+            // a horizontal shift; anything else is a wrong match.
+            let tilt = (kept_from_absorbed.rotation * Vector3::z()).angle(&Vector3::z());
+            if tilt > 10f64.to_radians() || kept_from_absorbed.translation.vector.z.abs() > 0.3 {
+                continue;
+            }
+            let (agree_t, agree_r) = self.config.merge_agreement;
+            let votes = self.merge_votes.entry((kept, absorbed)).or_default();
+            let agrees = votes.iter().any(|v| {
+                let d = v.inverse() * kept_from_absorbed;
+                d.translation.vector.norm() < agree_t && d.rotation.angle() < agree_r
+            });
+            votes.push(kept_from_absorbed);
+            if agrees {
+                self.merge(kept, absorbed, &kept_from_absorbed);
+                self.link(m, n, &reg, LinkKind::Loop);
+                return Some((kept, absorbed));
+            }
+        }
+        None
+    }
+
+    /// Moves everything of frame `absorbed` into frame `kept`.
+    fn merge(&mut self, kept: usize, absorbed: usize, kept_from_absorbed: &Isometry3<f64>) {
+        tracing::info!(
+            kept,
+            absorbed,
+            "coordinate frames merged by a verified inter-robot match"
+        );
+        for node in self.nodes.iter_mut().filter(|n| n.frame == absorbed) {
+            node.pose = kept_from_absorbed * node.pose;
+            node.frame = kept;
+        }
+        let absorbed_robots: Vec<usize> = (0..self.robots.len())
+            .filter(|&k| self.robots[k].frame == absorbed)
+            .collect();
+        for &k in &absorbed_robots {
+            self.robots[k].frame = kept;
+        }
+        for p in self
+            .priors
+            .iter_mut()
+            .filter(|p| p.start && absorbed_robots.contains(&self.nodes[p.node].robot))
+        {
+            p.alive = false;
+        }
+        for p in self.priors.iter_mut().filter(|p| !p.start) {
+            if self.nodes[p.node].frame == kept
+                && absorbed_robots.contains(&self.nodes[p.node].robot)
+            {
+                // Heading and height priors stay valid (both frames share gravity and heading
+                // reference); only their reference pose moves with the node.
+                p.z = kept_from_absorbed * p.z;
+            }
+        }
+        for f in [kept, absorbed] {
+            self.frames[f].0 += 1;
+        }
+        self.frames[kept].1 = true;
+        self.merge_votes
+            .retain(|&(a, b), _| a != absorbed && b != absorbed);
+        self.stats.merges += 1;
+        if kept == 0 {
+            let moved: Vec<NodeCloud> = (0..self.nodes.len())
+                .filter(|&n| self.nodes[n].frame == 0)
+                .filter_map(|n| node_cloud(&self.nodes, n))
+                .collect();
+            self.map.rebuild(moved);
+        }
+    }
+
+    /// Candidates to relocalise robot `k` against: its recent keyframes, keyframes of its frame
+    /// near `around`, and look-alike keyframes of its frame.
+    fn relocalisation_candidates(
+        &self,
+        k: usize,
+        around: &Isometry3<f64>,
+        observation: &Observation,
+    ) -> Vec<usize> {
+        let r = &self.robots[k];
+        let limit = self.config.relocalisation_candidates;
+        let mut out: Vec<usize> = vec![];
+        let push = |n: usize, out: &mut Vec<usize>| {
+            if out.len() < limit && !out.contains(&n) {
+                out.push(n);
+            }
+        };
+        for &n in r.nodes.iter().rev().take(limit / 3 + 1) {
+            push(n, &mut out);
+        }
+        let here = around.translation.vector;
+        let axis = around.rotation * Vector3::z();
+        let mut near: Vec<(f64, usize)> = self
+            .nodes
+            .iter()
+            .enumerate()
+            .filter(|(_, o)| {
+                o.frame == r.frame && (o.pose.rotation * Vector3::z()).angle(&axis) < 1.0
+            })
+            .map(|(m, o)| ((o.pose.translation.vector - here).norm(), m))
+            .filter(|&(d, _)| d < 3.0)
+            .collect();
+        near.sort_by(|a, b| a.0.total_cmp(&b.0));
+        for &(_, n) in near.iter().take(limit / 3 + 1) {
+            push(n, &mut out);
+        }
+        let nodes = &self.nodes;
+        for (n, _) in self.place.query(&observation.descriptors, limit, |m| {
+            nodes[m].frame == r.frame
+        }) {
+            push(n, &mut out);
+        }
+        out
+    }
+
+    /// Heading and height priors on a new keyframe, when its vehicle measured them and they
+    /// agree with the visual estimate (a yaw spike or a table under the sonar does not).
+    fn add_priors(&mut self, n: usize, frame: &Frame) {
+        let node = &self.nodes[n];
+        let r = &self.robots[node.robot];
+        let camera_from_body = r.setup.body_from_camera.inverse();
+        let pose = node.pose;
+        let up_in_z = |z: &Isometry3<f64>| z.rotation.inverse() * Vector3::z();
+        let mut z = pose;
+        let mut info = vec![0.0; 36];
+        let mut any = false;
+        if let (Some(psi), Some(sigma)) = (frame.heading, self.config.heading_sigma) {
+            let estimate = body_yaw(&pose, &camera_from_body);
+            let d = wrap(psi - estimate);
+            if d.abs() < self.config.heading_gate {
+                z = Isometry3::from_parts(
+                    z.translation,
+                    UnitQuaternion::from_axis_angle(&Vector3::z_axis(), d) * z.rotation,
+                );
+                let a = up_in_z(&z);
+                let w = 1.0 / (sigma * sigma);
+                for i in 0..3 {
+                    for j in 0..3 {
+                        info[(3 + i) * 6 + 3 + j] = w * a[i] * a[j];
+                    }
+                }
+                any = true;
+            }
+        }
+        if let (Some(height), Some(sigma)) = (frame.height, self.config.height_sigma) {
+            // The body's height, as the camera's: z_camera = height − (R · t_camera→body).z.
+            let camera_z = height - (pose.rotation * camera_from_body.translation.vector).z;
+            if (camera_z - pose.translation.vector.z).abs() < self.config.height_gate {
+                z.translation.vector.z = camera_z;
+                let a = up_in_z(&z);
+                let w = 1.0 / (sigma * sigma);
+                for i in 0..3 {
+                    for j in 0..3 {
+                        info[i * 6 + j] = w * a[i] * a[j];
+                    }
+                }
+                any = true;
+            }
+        }
+        if any {
+            self.priors.push(Prior {
+                node: n,
+                z,
+                info,
+                start: false,
+                alive: true,
+            });
+            let f = self.nodes[n].frame;
+            self.since_optimised[f] += 1;
+            if self.since_optimised[f] >= self.config.optimise_every {
+                self.frames[f].1 = true;
+            }
+        }
+    }
+
+    /// The optimisation problem of one coordinate frame.
+    fn build_job(&self, frame: usize) -> Job {
+        let nodes: Vec<usize> = (0..self.nodes.len())
+            .filter(|&n| self.nodes[n].frame == frame)
+            .collect();
+        let mut index = HashMap::with_capacity(nodes.len());
+        let mut graph = Graph {
+            ids: vec![0],
+            poses: vec![Isometry3::identity()],
+            edges: vec![],
+        };
+        for (i, &n) in nodes.iter().enumerate() {
+            index.insert(n, i + 1);
+            let node = &self.nodes[n];
+            let robot = node.robot as u8;
+            graph.ids.push(vertex_id(b'a' + robot, (i + 1) as u64));
+            graph.poses.push(node.pose);
+        }
+        let mut loops = vec![];
+        for (id, l) in self.links.iter().enumerate() {
+            if let (true, Some(&i), Some(&j)) = (l.alive, index.get(&l.a), index.get(&l.b)) {
+                if l.kind == LinkKind::Loop {
+                    loops.push((graph.edges.len(), id));
+                }
+                graph.edges.push(Edge {
+                    i,
+                    j,
+                    z: l.a_from_b,
+                    info: l.info.clone(),
+                });
+            }
+        }
+        for p in self.priors.iter().filter(|p| p.alive) {
+            if let Some(&j) = index.get(&p.node) {
+                graph.edges.push(Edge {
+                    i: 0,
+                    j,
+                    z: p.z,
+                    info: p.info.clone(),
+                });
+            }
+        }
+        Job {
+            frame,
+            epoch: self.frames[frame].0,
+            nodes,
+            graph,
+            loops,
+        }
+    }
+
+    /// Starts an optimisation of a frame that needs one (inline when not in the background).
+    fn schedule(&mut self) {
+        if self.in_flight {
+            return;
+        }
+        let Some(f) = (0..self.frames.len()).find(|&f| self.frames[f].1) else {
+            return;
+        };
+        self.frames[f].1 = false;
+        self.since_optimised[f] = 0;
+        let job = self.build_job(f);
+        if job.graph.edges.is_empty() {
+            return;
+        }
+        match &self.worker {
+            Some(w) => {
+                if w.jobs.send(job).is_ok() {
+                    self.in_flight = true;
+                }
+            }
+            None => {
+                let done = run_job(job, &self.config.optimiser, self.config.loop_reject_chi2);
+                self.apply(done);
+            }
+        }
+    }
+
+    /// Takes a finished optimisation and a finished map rebuild, if any.
+    fn poll(&mut self) {
+        if let Some(w) = &self.worker {
+            match w.done.try_recv() {
+                Ok(done) => {
+                    self.in_flight = false;
+                    self.apply(done);
+                }
+                Err(TryRecvError::Empty) => {}
+                Err(TryRecvError::Disconnected) => self.in_flight = false,
+            }
+        }
+        let nodes = &self.nodes;
+        if self.map.poll(|n| node_cloud(nodes, n)) == RebuildStatus::SwappedStale {
+            self.rebuild_map();
+        }
+    }
+
+    /// Applies an optimisation: the optimised keyframes take their new poses, keyframes added
+    /// since follow their parents' corrections.
+    fn apply(&mut self, done: Done) {
+        let (poses, report) = match done.result {
+            Ok(r) => r,
+            Err(e) => {
+                tracing::warn!(frame = done.frame, "pose-graph optimisation failed: {e}");
+                return;
+            }
+        };
+        if done.epoch != self.frames[done.frame].0 {
+            // A merge changed the frame meanwhile: optimise it again.
+            self.frames[done.frame].1 = true;
+            return;
+        }
+        if !done.rejected.is_empty() {
+            tracing::info!(
+                count = done.rejected.len(),
+                "loop closures switched off: they disagree with the rest of the graph"
+            );
+            for &l in &done.rejected {
+                self.links[l].alive = false;
+            }
+            self.stats.rejected_loop_closures += done.rejected.len();
+            self.frames[done.frame].1 = true;
+        }
+        let mut correction: HashMap<usize, Isometry3<f64>> = HashMap::new();
+        let mut largest = (0.0f64, 0.0f64);
+        for (i, &n) in done.nodes.iter().enumerate() {
+            let new = poses[i + 1];
+            let c = new * self.nodes[n].pose.inverse();
+            let d = self.nodes[n].pose.inverse() * new;
+            largest.0 = largest.0.max(d.translation.vector.norm());
+            largest.1 = largest.1.max(d.rotation.angle());
+            correction.insert(n, c);
+            self.nodes[n].pose = new;
+        }
+        let first_new = done.nodes.last().map_or(0, |&n| n + 1);
+        for n in first_new..self.nodes.len() {
+            if self.nodes[n].frame != done.frame {
+                continue;
+            }
+            let c = self.nodes[n]
+                .parent
+                .and_then(|p| correction.get(&p).copied())
+                .unwrap_or_else(Isometry3::identity);
+            self.nodes[n].pose = c * self.nodes[n].pose;
+            correction.insert(n, c);
+        }
+        self.stats.optimisations += 1;
+        self.stats.last_optimisation_s = report.time_s;
+        if done.frame == 0
+            && (largest.0 > self.config.rebuild_translation
+                || largest.1 > self.config.rebuild_rotation)
+        {
+            self.rebuild_map();
+        }
+    }
+
+    fn rebuild_map(&mut self) {
+        let nodes: Vec<NodeCloud> = (0..self.nodes.len())
+            .filter(|&n| self.nodes[n].frame == 0)
+            .filter_map(|n| node_cloud(&self.nodes, n))
+            .collect();
+        self.map.rebuild(nodes);
+    }
+}
+
+fn node_cloud(nodes: &[Node], n: usize) -> Option<NodeCloud> {
+    nodes
+        .get(n)
+        .filter(|node| node.frame == 0)
+        .map(|node| NodeCloud {
+            node: n,
+            map_from_camera: node.pose,
+            cloud: node.cloud.clone(),
+        })
+}
+
+fn lost(why: String) -> FrameReport {
+    FrameReport {
+        tracking: Tracking::Lost(why),
+        keyframe: None,
+        loop_closures: 0,
+        merged: None,
+    }
+}

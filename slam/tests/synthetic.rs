@@ -1,0 +1,389 @@
+//! The SLAM on sequences rendered by the simulator, with its ground truth to compare against:
+//! drones flown through the built-in apartment (turning on the spot, flying routes that close
+//! loops, two drones that start apart and must end in one map), and a camera moved along the
+//! real TUM fr1/xyz motion-capture trajectory.
+
+use std::path::Path;
+use std::sync::Arc;
+use std::time::Duration;
+
+use link::Sticks;
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use nav::grid::Cell;
+use sitl::{Camera, Sim, SimConfig, World};
+use slam::dataset::Pinhole;
+use slam::eval::{Alignment, ate};
+use slam::system::{Frame, RobotSetup, Slam, SlamConfig, Tracking};
+use slam::trajectory::{Stamped, read_tum};
+
+/// A waypoint for the test pilot: x, y, z (metres), yaw (radians).
+type Waypoint = [f64; 4];
+
+/// Flies the simulated vehicles along waypoint lists with a ground-truth pilot (the test's, not
+/// the station's), feeding every camera frame (10 Hz) to the SLAM with the vehicle's IMU heading
+/// and sonar height. Returns the SLAM, the true camera trajectories and the lost-frame counts.
+struct Flight {
+    sim: Sim,
+    slam: Slam,
+    truth: Vec<Vec<Stamped>>,
+    lost: Vec<usize>,
+    frames: Vec<usize>,
+}
+
+fn body_from_camera() -> Isometry3<f64> {
+    sitl::Vehicle::new(sitl::VehicleParams::default(), 0.0, 0.0, 0.0).map_from_camera()
+}
+
+impl Flight {
+    fn new(drones: usize, known_start: &[bool], config: SlamConfig) -> Self {
+        let world = Arc::new(World::load("apartment").expect("built-in world"));
+        let mut sim = Sim::new(
+            world,
+            drones,
+            SimConfig {
+                camera: Some(Camera::kinect(320, 240)),
+                camera_hz: 10.0,
+                ..SimConfig::default()
+            },
+        )
+        .expect("sim");
+        let setups = (0..drones)
+            .map(|k| {
+                let s = sim.vehicle(k).state();
+                RobotSetup {
+                    body_from_camera: body_from_camera(),
+                    start: known_start[k].then(|| {
+                        Isometry3::new(
+                            Vector3::new(s.position[0], s.position[1], 0.0),
+                            Vector3::z() * s.yaw,
+                        )
+                    }),
+                }
+            })
+            .collect();
+        for k in 0..drones {
+            sim.vehicle_mut(k).set_armed(true);
+        }
+        Self {
+            sim,
+            slam: Slam::new(config, setups),
+            truth: vec![vec![]; drones],
+            lost: vec![0; drones],
+            frames: vec![0; drones],
+        }
+    }
+
+    /// Flies every drone through its waypoints (reached within 0.15 m and 5°, then the next).
+    fn fly(&mut self, routes: &[Vec<Waypoint>], max_seconds: f64) {
+        let n = routes.len();
+        let mut next = vec![0usize; n];
+        let steps = (max_seconds * 100.0) as usize;
+        for _ in 0..steps {
+            if (0..n).all(|k| next[k] >= routes[k].len()) {
+                break;
+            }
+            for (k, route) in routes.iter().enumerate() {
+                let goal = route.get(next[k]).copied().unwrap_or_else(|| {
+                    let s = self.sim.vehicle(k).state();
+                    [s.position[0], s.position[1], s.position[2], s.yaw]
+                });
+                let (sticks, reached) = pilot(self.sim.vehicle(k).state(), goal);
+                if reached {
+                    next[k] += 1;
+                }
+                self.sim.vehicle_mut(k).set_sticks(sticks);
+            }
+            self.sim.step(Duration::from_millis(10));
+            self.frames_due();
+        }
+    }
+
+    fn frames_due(&mut self) {
+        let due = self.sim.due_cameras();
+        for f in self.sim.render(&due) {
+            let k = usize::from(f.frame.vehicle);
+            let readings = self.sim.sense(k).expect("vehicle");
+            let rgb = image::RgbImage::from_raw(f.frame.width, f.frame.height, f.frame.rgb.clone())
+                .expect("rgb");
+            let i = f.frame.intrinsics;
+            let t = f.frame.stamp.as_secs_f64();
+            let report = self
+                .slam
+                .process(Frame {
+                    robot: k,
+                    stamp: t,
+                    grey: image::DynamicImage::ImageRgb8(rgb).into_luma8(),
+                    depth: f.frame.depth_mm.clone(),
+                    depth_scale: 0.001,
+                    camera: Pinhole {
+                        fx: i.fx.into(),
+                        fy: i.fy.into(),
+                        cx: i.cx.into(),
+                        cy: i.cy.into(),
+                    },
+                    heading: Some(readings.yaw),
+                    height: readings.sonar,
+                    predicted_body: None,
+                    known_camera_pose: None,
+                })
+                .expect("frame");
+            self.frames[k] += 1;
+            if let Tracking::Lost(why) = &report.tracking {
+                eprintln!("drone {} at {t:.1} s: lost: {why}", k + 1);
+                self.lost[k] += 1;
+            }
+            self.truth[k].push(Stamped {
+                t,
+                pose: f.map_from_camera,
+            });
+        }
+    }
+
+    /// ATE of drone `k`'s final trajectory: SE(3)-aligned, or in the map frame as it is.
+    fn ate(&self, k: usize, alignment: Option<Alignment>) -> f64 {
+        let est = self.slam.trajectory(k);
+        match alignment {
+            Some(a) => ate(&self.truth[k], &est, a, 1e-3).map_or(f64::INFINITY, |e| e.rmse_m),
+            None => {
+                // No alignment: the map frame must be the world's.
+                let pairs = slam::eval::associate(&self.truth[k], &est, 1e-3);
+                let sum: f64 = pairs
+                    .iter()
+                    .map(|&(i, j)| {
+                        (self.truth[k][i].pose.translation.vector - est[j].pose.translation.vector)
+                            .norm_squared()
+                    })
+                    .sum();
+                (sum / pairs.len().max(1) as f64).sqrt()
+            }
+        }
+    }
+}
+
+/// A ground-truth pilot: sticks toward a waypoint, and whether it is reached.
+fn pilot(s: &sitl::VehicleState, goal: Waypoint) -> (Sticks, bool) {
+    let (dx, dy) = (goal[0] - s.position[0], goal[1] - s.position[1]);
+    let (c, sn) = (s.yaw.cos(), s.yaw.sin());
+    let (fwd, left) = (c * dx + sn * dy, -sn * dx + c * dy);
+    let (vf, vl) = (
+        c * s.velocity[0] + sn * s.velocity[1],
+        -sn * s.velocity[0] + c * s.velocity[1],
+    );
+    let yaw_err = (goal[3] - s.yaw + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+        - std::f64::consts::PI;
+    let clamp = |v: f64, l: f64| v.clamp(-l, l) as f32;
+    let sticks = Sticks {
+        pitch: clamp(0.5 * fwd - 0.6 * vf, 0.35),
+        roll: clamp(-(0.5 * left - 0.6 * vl), 0.35),
+        yaw: clamp(-1.5 * yaw_err, 0.4),
+        throttle: clamp(1.5 * (goal[2] - s.position[2]), 0.6),
+    };
+    let reached = dx.hypot(dy) < 0.15
+        && (goal[2] - s.position[2]).abs() < 0.1
+        && yaw_err.abs() < 5f64.to_radians();
+    (sticks, reached)
+}
+
+/// A full turn on the spot at (x, y, z), in 30° steps from `yaw`.
+fn turn(x: f64, y: f64, z: f64, yaw: f64) -> Vec<Waypoint> {
+    (0..=12)
+        .map(|i| [x, y, z, yaw + f64::from(i) * 30f64.to_radians()])
+        .collect()
+}
+
+fn start_of(f: &Flight, k: usize) -> (f64, f64, f64) {
+    let s = f.sim.vehicle(k).state();
+    (s.position[0], s.position[1], s.yaw)
+}
+
+#[test]
+fn a_drone_turning_on_the_spot_is_tracked_and_closes_its_loop() {
+    let mut f = Flight::new(1, &[true], SlamConfig::default());
+    let (x, y, yaw) = start_of(&f, 0);
+    let mut route = vec![[x, y, 1.0, yaw]];
+    route.extend(turn(x, y, 1.0, yaw));
+    f.fly(&[route], 60.0);
+    f.slam.finish();
+    let e = f.ate(0, None);
+    eprintln!(
+        "{} frames, {} lost, ATE {e:.3} m (map frame)",
+        f.frames[0], f.lost[0]
+    );
+    assert!(
+        f.lost[0] * 20 <= f.frames[0],
+        "{} of {} lost",
+        f.lost[0],
+        f.frames[0]
+    );
+    assert!(e < 0.05, "ATE {e:.3} m");
+    assert!(f.slam.stats().loop_closures > 0, "the turn closes a loop");
+}
+
+#[test]
+fn a_drone_flying_a_loop_through_the_apartment_stays_within_centimetres() {
+    // Start 1 is in the south-east room; out through its door to the corridor, west along it,
+    // and back: a loop of about 14 m.
+    let mut f = Flight::new(1, &[true], SlamConfig::default());
+    let (x, y, yaw) = start_of(&f, 0);
+    let route = vec![
+        [x, y, 1.0, yaw],
+        [x, y, 1.0, std::f64::consts::FRAC_PI_2],
+        [x, 4.7, 1.0, std::f64::consts::FRAC_PI_2],
+        [x, 4.7, 1.0, std::f64::consts::PI],
+        [9.0, 4.7, 1.0, std::f64::consts::PI],
+        [7.0, 4.7, 1.0, std::f64::consts::PI],
+        [7.0, 4.7, 1.0, 0.0],
+        [x, 4.7, 1.0, 0.0],
+        [x, 4.7, 1.0, -std::f64::consts::FRAC_PI_2],
+        [x, y, 1.0, -std::f64::consts::FRAC_PI_2],
+    ];
+    f.fly(&[route], 120.0);
+    f.slam.finish();
+    let e = f.ate(0, None);
+    eprintln!(
+        "{} frames, {} lost, ATE {e:.3} m, {:?}",
+        f.frames[0],
+        f.lost[0],
+        f.slam.stats()
+    );
+    assert!(
+        f.lost[0] * 20 <= f.frames[0],
+        "{} of {} lost",
+        f.lost[0],
+        f.frames[0]
+    );
+    assert!(e < 0.05, "ATE {e:.3} m");
+}
+
+#[test]
+fn a_camera_on_the_real_fr1_xyz_motion_is_tracked_to_within_two_centimetres() {
+    // The real hand-held motion (motion capture, 30 s), replayed by a camera standing 1.3 m up
+    // in the north-west room, looking across it; rendered at 30 Hz.
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/data/rgbd/tum_fr1_xyz_trajectories/freiburg1_xyz-groundtruth.txt");
+    let gt = read_tum(&path).expect("fr1/xyz ground truth");
+    let world = World::load("apartment").expect("built-in");
+    let camera = Camera::kinect(320, 240);
+    // Anchor: the first pose maps to a camera at (1.5, 7.5) facing east, level.
+    let anchor = Isometry3::from_parts(
+        Translation3::new(1.5, 7.5, 1.3),
+        UnitQuaternion::from_matrix(&nalgebra::Matrix3::new(
+            0.0, 0.0, 1.0, //
+            -1.0, 0.0, 0.0, //
+            0.0, -1.0, 0.0,
+        )),
+    );
+    let first = gt[0].pose;
+    let mut slam = Slam::new(
+        SlamConfig::default(),
+        vec![RobotSetup {
+            body_from_camera: Isometry3::identity(),
+            start: None,
+        }],
+    );
+    let (mut truth, mut lost, mut frames) = (vec![], 0, 0);
+    let t0 = gt[0].t;
+    let mut next = t0;
+    for s in &gt {
+        if s.t < next {
+            continue;
+        }
+        next += 1.0 / 30.0;
+        let pose = anchor * first.inverse() * s.pose;
+        let (rgb, depth) = sitl::render::render(&world, &pose, &camera, Some((7, frames)));
+        frames += 1;
+        let grey = image::DynamicImage::ImageRgb8(
+            image::RgbImage::from_raw(camera.width, camera.height, rgb).expect("rgb"),
+        )
+        .into_luma8();
+        let k = camera.intrinsics;
+        let report = slam
+            .process(Frame {
+                robot: 0,
+                stamp: s.t - t0,
+                grey,
+                depth,
+                depth_scale: 0.001,
+                camera: Pinhole {
+                    fx: k.fx.into(),
+                    fy: k.fy.into(),
+                    cx: k.cx.into(),
+                    cy: k.cy.into(),
+                },
+                heading: None,
+                height: None,
+                predicted_body: None,
+                known_camera_pose: None,
+            })
+            .expect("frame");
+        if let Tracking::Lost(_) = report.tracking {
+            lost += 1;
+        }
+        truth.push(Stamped { t: s.t - t0, pose });
+    }
+    slam.finish();
+    let e = ate(&truth, &slam.trajectory(0), Alignment::Se3, 1e-3).expect("pairs");
+    eprintln!(
+        "{frames} frames, {lost} lost, ATE {:.4} m over {} poses",
+        e.rmse_m, e.pairs
+    );
+    assert!(lost * 50 <= frames, "{lost} of {frames} lost");
+    assert!(e.rmse_m < 0.02, "ATE {:.4} m", e.rmse_m);
+}
+
+#[test]
+fn two_drones_that_start_apart_end_in_one_map() {
+    // Drone 1 knows its start; drone 2 does not: it maps in its own frame until its views match
+    // drone 1's, then its whole trajectory must land in the map frame where it really is.
+    let mut f = Flight::new(2, &[true, false], SlamConfig::default());
+    let (x1, y1, yaw1) = start_of(&f, 0);
+    let (x2, y2, yaw2) = start_of(&f, 1);
+    let mut r1 = vec![[x1, y1, 1.0, yaw1]];
+    r1.extend(turn(x1, y1, 1.0, yaw1));
+    let mut r2 = vec![[x2, y2, 1.15, yaw2]];
+    r2.extend(turn(x2, y2, 1.15, yaw2));
+    f.fly(&[r1, r2], 90.0);
+    f.slam.finish();
+    let stats = f.slam.stats();
+    eprintln!("{stats:?}, lost {:?} of {:?}", f.lost, f.frames);
+    assert_eq!(stats.merges, 1, "drone 2's frame is anchored in the map");
+    let e2 = f.slam.estimate(1).expect("robot 2");
+    assert!(e2.in_map);
+    // In the map frame as it is (no alignment): both within centimetres of the truth.
+    for k in 0..2 {
+        let e = f.ate(k, None);
+        assert!(e < 0.08, "drone {}: {e:.3} m in the map frame", k + 1);
+    }
+    // One map: the room the two drones share has its walls where the world has them, and no
+    // floor or ceiling in the 2D projection.
+    let grid = f.slam.map().project().expect("a map");
+    let world = World::load("apartment").expect("built-in");
+    let [free, occupied, _] = grid.counts();
+    assert!(
+        free > 5_000 && occupied > 500,
+        "free {free}, occupied {occupied}"
+    );
+    let mut wrong = 0;
+    for y in 0..grid.height() {
+        for x in 0..grid.width() {
+            if grid.get((x, y)) != Cell::Occupied {
+                continue;
+            }
+            // An occupied cell must lie within 0.15 m of a solid world cell.
+            let p = grid.center_of((x, y));
+            let near_wall = [-0.15, 0.0, 0.15].iter().any(|dx| {
+                [-0.15, 0.0, 0.15].iter().any(|dy| {
+                    let (cx, cy) = world.cell_of([p[0] + dx, p[1] + dy]);
+                    world.material(cx, cy).is_solid()
+                })
+            });
+            if !near_wall {
+                wrong += 1;
+            }
+        }
+    }
+    assert!(
+        wrong * 50 < occupied,
+        "{wrong} of {occupied} occupied cells are nowhere near a wall (floor, ceiling or a second copy)"
+    );
+}
