@@ -22,7 +22,6 @@ use gcs::evaluate::{WallError, coverage, reachable_free, wall_error};
 use gcs::fleet::{LinkKind, SimFleet, SimFleetConfig, sim_body_from_camera};
 use gcs::outputs;
 use gcs::record::{Record, Recorder, Setup, SetupDrone};
-use gcs::runtime::drone::Phase;
 use gcs::runtime::{MissionState, Outcome, Runtime, RuntimeConfig};
 
 /// Arguments of `gcs explore`.
@@ -117,7 +116,8 @@ pub struct Summary {
     pub wall_error: Option<WallError>,
     /// Wall collisions of all drones.
     pub collisions: u32,
-    /// Every drone ended on the ground, disarmed.
+    /// Every drone ended on the ground, disarmed (as the simulator saw it: a drone whose link
+    /// was lost counts once its own failsafe has landed it).
     pub all_landed: bool,
     /// The world.
     pub world: String,
@@ -341,6 +341,12 @@ pub fn run(args: &ExploreArgs) -> anyhow::Result<()> {
     let report = runtime
         .join()
         .context("the mission loop stopped unexpectedly")?;
+    // A drone whose link was lost is landed by its own failsafe: give it time to come down
+    // (the summary's `all_landed` is what the simulator says, not what the station believes).
+    let down_by = clock.now() + 60.0;
+    while !all_down(&sitl) && clock.now() < down_by {
+        std::thread::sleep(Duration::from_millis(20));
+    }
     let collisions: Vec<u32> = sitl.with_sim(|sim| {
         (0..sim.len())
             .map(|k| sim.vehicle(k).state().collisions)
@@ -362,7 +368,7 @@ pub fn run(args: &ExploreArgs) -> anyhow::Result<()> {
             .map_or(0.0, |g| coverage(&reachable, &world, g)),
         wall_error: grid.as_ref().and_then(|g| wall_error(&world, g)),
         collisions: collisions.iter().sum(),
-        all_landed: report.drones.iter().all(|d| d.phase == Phase::Landed),
+        all_landed: all_down(&sitl),
         world: world.name().into(),
         link: args.link.name(),
         strategy: args.strategy.name(),
@@ -452,6 +458,16 @@ fn truth(sitl: &sitl::Sitl) -> Vec<[f64; 4]> {
                 [s.position[0], s.position[1], s.position[2], s.yaw]
             })
             .collect()
+    })
+}
+
+/// Whether every simulated vehicle is on the ground and disarmed.
+fn all_down(sitl: &sitl::Sitl) -> bool {
+    sitl.with_sim(|sim| {
+        (0..sim.len()).all(|k| {
+            let s = sim.vehicle(k).state();
+            s.landed && !s.armed
+        })
     })
 }
 

@@ -69,6 +69,9 @@ pub struct EkfConfig {
     pub gate_chi2: f64,
     /// The pose is valid while the position's standard deviation stays below this, metres.
     pub max_position_sigma: f64,
+    /// A SLAM fix this far (metres) and five standard deviations from a valid estimate is
+    /// refused: loop-closure corrections are real jumps but bounded, a wild pose is not.
+    pub max_slam_jump_m: f64,
 }
 
 impl Default for EkfConfig {
@@ -91,6 +94,7 @@ impl Default for EkfConfig {
             attitude_sigma: 1f64.to_radians(),
             gate_chi2: 16.0,
             max_position_sigma: 0.35,
+            max_slam_jump_m: 2.0,
         }
     }
 }
@@ -396,8 +400,16 @@ impl Ekf {
             self.config.slam_position_sigma.powi(2),
             self.config.slam_yaw_sigma.powi(2),
         );
-        // Never gated: the SLAM's corrections after a loop closure are real jumps, and a
-        // filter that refused them would fly on its own drift from then on.
+        // Not gated by the innovation test: the SLAM's corrections after a loop closure are
+        // real jumps, and a filter that refused them would fly on its own drift from then on.
+        // Only what no correction can be (metres away from a confident estimate) is refused.
+        if let Some(e) = self.valid_estimate() {
+            let jump = (position[0] - e.position[0]).hypot(position[1] - e.position[1]);
+            if jump > self.config.max_slam_jump_m.max(5.0 * e.position_sigma) {
+                self.outliers += 1;
+                return Update::Outlier;
+            }
+        }
         let u = self.update(
             t,
             [PX, PY, PZ, YAW],
@@ -561,6 +573,13 @@ mod tests {
             Update::Ignored
         );
         assert_eq!(ekf.update_height(0.1, f64::INFINITY), Update::Ignored);
+        // A SLAM pose a kilometre away is no loop-closure correction.
+        assert_eq!(
+            ekf.update_slam(0.1, [1000.0, 0.0, 1.0], 0.0),
+            Update::Outlier
+        );
+        // A real correction of a metre is taken.
+        assert_eq!(ekf.update_slam(0.1, [1.0, 0.0, 1.0], 0.0), Update::Applied);
         // A flight controller reporting a lean of 80° (a crash, or a corrupt sample) must not
         // throw the filter to infinity: lean and speed stay bounded.
         for k in 1..=100 {

@@ -42,14 +42,25 @@ fn words(d: &Descriptor, positions: &[[u8; BITS]; TABLES]) -> [u32; TABLES] {
     out
 }
 
+/// One indexed keyframe.
+#[derive(Debug, Clone)]
+struct Entry {
+    /// The caller's key.
+    key: usize,
+    /// Its words and their counts.
+    bag: Vec<(u32, u16)>,
+    /// Norm of its tf-idf vector.
+    norm: f32,
+}
+
 /// An inverted index of keyframes' visual words.
 #[derive(Debug, Clone)]
 pub struct PlaceIndex {
     positions: [[u8; BITS]; TABLES],
     /// Word → (entry, count in that entry).
     postings: HashMap<u32, Vec<(usize, u16)>>,
-    /// Entry → (key given by the caller, its words and counts, norm of its tf-idf vector).
-    entries: Vec<(usize, Vec<(u32, u16)>, f32)>,
+    /// Every indexed keyframe.
+    entries: Vec<Entry>,
     /// Index size when every entry's norm was last computed (idf drifts as the index grows).
     normed_at: usize,
 }
@@ -99,16 +110,20 @@ impl PlaceIndex {
         for &(w, c) in &bag {
             self.postings.entry(w).or_default().push((entry, c));
         }
-        self.entries.push((key, bag, 1.0));
+        self.entries.push(Entry {
+            key,
+            bag,
+            norm: 1.0,
+        });
         // Norms follow the idf weights: the new entry's now, everyone's again whenever the
         // index has grown by a quarter (amortised constant work per entry).
         if self.entries.len() >= self.normed_at + self.normed_at.div_ceil(4).max(1) {
             for e in 0..self.entries.len() {
-                self.entries[e].2 = self.norm(&self.entries[e].1);
+                self.entries[e].norm = self.norm(&self.entries[e].bag);
             }
             self.normed_at = self.entries.len();
         } else {
-            self.entries[entry].2 = self.norm(&self.entries[entry].1);
+            self.entries[entry].norm = self.norm(&self.entries[entry].bag);
         }
     }
 
@@ -162,8 +177,8 @@ impl PlaceIndex {
             .filter(|&(_, &s)| s > 0.0)
             .map(|(e, &s)| {
                 (
-                    self.entries[e].0,
-                    (s / (query_norm * self.entries[e].2)).min(1.0),
+                    self.entries[e].key,
+                    (s / (query_norm * self.entries[e].norm)).min(1.0),
                 )
             })
             .filter(|&(key, _)| accept(key))
