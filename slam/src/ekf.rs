@@ -135,6 +135,9 @@ pub enum Update {
     Applied,
     /// Rejected by the innovation gate.
     Outlier,
+    /// A SLAM pose too far from the estimate to be noise, taken as a correction of the map
+    /// (after a loop closure): position and heading moved to it, velocity kept.
+    Corrected,
     /// The filter has no fix yet, or the measurement is older than the history.
     Ignored,
 }
@@ -410,10 +413,46 @@ impl Ekf {
                 return Update::Outlier;
             }
         }
+        let z = [position[0], position[1], position[2], yaw];
+        if self.fixed
+            && let Some(then) = self.state_at(t)
+        {
+            // Innovation against the state when the pose was taken, in the measurement's own
+            // standard deviations: far beyond noise, the map moved (a loop closure), not the
+            // vehicle. A Kalman update would read the jump as motion and wind it into the
+            // velocity; shift the estimate instead.
+            let rows = [PX, PY, PZ, YAW];
+            let mut y = [0.0; 4];
+            for (i, &row) in rows.iter().enumerate() {
+                y[i] = z[i] - then[row];
+            }
+            y[3] = wrap(y[3]);
+            let normalised = (y[0] * y[0] + y[1] * y[1] + y[2] * y[2]) / sp + y[3] * y[3] / sy;
+            if normalised > self.config.gate_chi2 * 4.0 {
+                for (i, &row) in rows.iter().enumerate() {
+                    self.x[row] += y[i];
+                }
+                self.x[YAW] = wrap(self.x[YAW]);
+                for h in &mut self.history {
+                    for (i, &row) in rows.iter().enumerate() {
+                        h.1[row] += y[i];
+                    }
+                    h.1[YAW] = wrap(h.1[YAW]);
+                }
+                for (&row, r) in rows.iter().zip([sp, sp, sp, sy]) {
+                    for j in 0..N {
+                        self.p[(row, j)] = 0.0;
+                        self.p[(j, row)] = 0.0;
+                    }
+                    self.p[(row, row)] = r;
+                }
+                return Update::Corrected;
+            }
+        }
         let u = self.update(
             t,
             [PX, PY, PZ, YAW],
-            [position[0], position[1], position[2], yaw],
+            z,
             [sp, sp, sp, sy],
             [false, false, false, true],
             true,
@@ -578,8 +617,15 @@ mod tests {
             ekf.update_slam(0.1, [1000.0, 0.0, 1.0], 0.0),
             Update::Outlier
         );
-        // A real correction of a metre is taken.
-        assert_eq!(ekf.update_slam(0.1, [1.0, 0.0, 1.0], 0.0), Update::Applied);
+        // A real correction of a metre is taken as one: the estimate moves, the velocity
+        // does not take the jump for motion.
+        assert_eq!(
+            ekf.update_slam(0.1, [1.0, 0.0, 1.0], 0.0),
+            Update::Corrected
+        );
+        let e = ekf.estimate();
+        assert!((e.position[0] - 1.0).abs() < 1e-9, "{e:?}");
+        assert!(e.velocity[0].abs() < 1e-6, "{e:?}");
         // A flight controller reporting a lean of 80° (a crash, or a corrupt sample) must not
         // throw the filter to infinity: lean and speed stay bounded.
         for k in 1..=100 {

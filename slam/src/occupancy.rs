@@ -36,6 +36,9 @@ pub struct OccupancyConfig {
     pub occupancy_min_z: f64,
     /// Highest height projected to the 2D grid, metres.
     pub occupancy_max_z: f64,
+    /// A 2D cell is occupied when at least this many voxels of its column within the band are
+    /// (walls and furniture span many; a lone voxel is depth noise or a stray ray).
+    pub occupied_min_voxels: usize,
 }
 
 impl Default for OccupancyConfig {
@@ -50,6 +53,7 @@ impl Default for OccupancyConfig {
             max_range: 4.0,
             occupancy_min_z: 0.3,
             occupancy_max_z: 2.0,
+            occupied_min_voxels: 2,
         }
     }
 }
@@ -325,18 +329,32 @@ impl VoxelMap {
         }
         let (w, h) = ((hi[0] - lo[0]) as usize, (hi[1] - lo[1]) as usize);
         let origin = [f64::from(lo[0]) * r, f64::from(lo[1]) * r];
-        let mut grid = Grid::new(w, h, r, origin, Cell::Unknown);
+        // Per column: occupied voxels, and whether any voxel is known free.
+        let mut occupied = vec![0u16; w * h];
+        let mut free = vec![false; w * h];
         for (key, c) in &self.chunks {
             for (i, l) in c.iter().enumerate() {
                 let v = join(*key, i);
                 if v[2] < z0 || v[2] > z1 || *l == 0.0 {
                     continue;
                 }
-                let cell = ((v[0] - lo[0]) as usize, (v[1] - lo[1]) as usize);
-                match (grid.get(cell), *l > 0.0) {
-                    (_, true) => grid.set(cell, Cell::Occupied),
-                    (Cell::Unknown, false) => grid.set(cell, Cell::Free),
-                    _ => {}
+                let cell = (v[1] - lo[1]) as usize * w + (v[0] - lo[0]) as usize;
+                if *l > 0.0 {
+                    occupied[cell] = occupied[cell].saturating_add(1);
+                } else {
+                    free[cell] = true;
+                }
+            }
+        }
+        let mut grid = Grid::new(w, h, r, origin, Cell::Unknown);
+        let min = self.config.occupied_min_voxels.max(1);
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                if usize::from(occupied[i]) >= min {
+                    grid.set((x, y), Cell::Occupied);
+                } else if free[i] {
+                    grid.set((x, y), Cell::Free);
                 }
             }
         }
@@ -550,5 +568,22 @@ mod tests {
         assert_eq!(n, m.occupied().len());
         assert_eq!(text.lines().count(), n + 8);
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn a_lone_stray_hit_in_free_space_is_no_wall() {
+        let mut m = VoxelMap::new(OccupancyConfig::default());
+        let o = Point3::new(0.02, 0.02, 1.02);
+        // Free space swept at every height of the band from the origin to x = 2 m…
+        for k in 0..30 {
+            let z = 0.35 + f64::from(k) * 0.05;
+            m.insert_ray(&o, &Point3::new(2.02, 0.02, z));
+        }
+        // …and one stray return (depth noise) at x = 1 m, at one height only.
+        m.insert_ray(&o, &Point3::new(1.02, 0.02, 1.02));
+        let g = m.project().expect("a map");
+        let at = |x: f64| g.cell_of([x, 0.02]).map(|c| g.get(c));
+        assert_eq!(at(1.02), Some(Cell::Free), "a lone voxel became a wall");
+        assert_eq!(at(2.02), Some(Cell::Occupied), "the wall is kept");
     }
 }
