@@ -3,6 +3,7 @@
 mod explore;
 mod plan;
 mod probe;
+mod replay;
 mod slam_cmd;
 
 use std::process::ExitCode;
@@ -25,6 +26,8 @@ struct Cli {
 enum Top {
     /// Explore a simulated building with several drones, end to end (the main job).
     Explore(explore::ExploreArgs),
+    /// Rerun the SLAM on a recorded mission (MCAP) and report how the result differs.
+    Replay(replay::ReplayArgs),
     /// One mission-planner step on a map: frontiers, assignment, paths.
     Plan(plan::PlanArgs),
     /// SLAM back-end tools: pose-graph optimisation and trajectory evaluation.
@@ -56,6 +59,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Top::Explore(args) => explore::run(&args),
+        Top::Replay(args) => replay::run(&args),
         Top::Plan(args) => plan::run(&args),
         Top::Slam { command } => slam_cmd::run(&command),
         Top::Link {

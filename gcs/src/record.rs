@@ -1,6 +1,7 @@
 //! Everything the mission sees and does, recorded to MCAP with Foxglove's schemas so Foxglove
 //! opens the log as it is: camera frames (`foxglove.CompressedImage`, colour as JPEG, depth as
-//! 16-bit PNG in millimetres, with `foxglove.CameraCalibration`), every drone's telemetry, link
+//! 16-bit PNG in millimetres, with `foxglove.CameraCalibration`, and the simulator's true camera
+//! pose as `foxglove.PoseInFrame` when there is one), every drone's telemetry, link
 //! state, RC sticks and phase (JSON), its pose (`foxglove.PoseInFrame`, and `foxglove.FrameTransform`
 //! on `/tf`), the 2D map (`foxglove.Grid`), the occupied voxels (`foxglove.PointCloud`), the
 //! planner's decisions (JSON) and the operator's commands (`foxglove.Log`).
@@ -95,6 +96,9 @@ pub enum Record {
         drone: usize,
         /// The frame.
         frame: Arc<RgbdFrame>,
+        /// The camera's true pose in the map, when a simulator knows it (written on
+        /// `/droneK/camera/truth`, so a replay can map on it and evaluations can use it).
+        truth: Option<nalgebra::Isometry3<f64>>,
     },
     /// A drone's control tick.
     Drone {
@@ -400,7 +404,12 @@ fn write_record(w: &mut McapWriter, ch: &mut Channels, r: &Record) -> Result<u64
             ch.write(w, c, 0.0, &data)?;
             Ok(1)
         }
-        Record::Camera { t, drone, frame } => {
+        Record::Camera {
+            t,
+            drone,
+            frame,
+            truth,
+        } => {
             let k = drone + 1;
             let frame_id = format!("drone{k}_camera");
             let colour = image::RgbImage::from_raw(frame.width, frame.height, frame.rgb.clone())
@@ -457,7 +466,30 @@ fn write_record(w: &mut McapWriter, ch: &mut Channels, r: &Record) -> Result<u64
                 p: vec![fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0],
             };
             ch.write(w, c, *t, &encode(&m)?)?;
-            Ok(3)
+            let Some(pose) = truth else {
+                return Ok(3);
+            };
+            let (v, q) = (pose.translation.vector, pose.rotation);
+            let c = ch.foxglove::<PoseInFrame>(w, &format!("/drone{k}/camera/truth"))?;
+            let m = PoseInFrame {
+                timestamp: stamp(*t),
+                frame_id: "map".into(),
+                pose: Some(Pose {
+                    position: Some(Vector3 {
+                        x: v.x,
+                        y: v.y,
+                        z: v.z,
+                    }),
+                    orientation: Some(Quaternion {
+                        x: q.i,
+                        y: q.j,
+                        z: q.k,
+                        w: q.w,
+                    }),
+                }),
+            };
+            ch.write(w, c, *t, &encode(&m)?)?;
+            Ok(4)
         }
         Record::Drone {
             t,

@@ -121,6 +121,7 @@ fn two_drones_explore_the_default_world_land_and_write_their_outputs() {
         ("/drone2/state", "gcs.DroneState"),
         ("/plan", "gcs.Plan"),
         ("/setup", "gcs.Setup"),
+        ("/drone2/camera/truth", "foxglove.PoseInFrame"),
     ] {
         assert_eq!(
             topics.get(topic).map(String::as_str),
@@ -132,7 +133,48 @@ fn two_drones_explore_the_default_world_land_and_write_their_outputs() {
     // MAVLink traffic as .tlog: 8-byte timestamps before each packet, MAVLink 2 frames.
     let tlog = std::fs::read(out.join("drone1.tlog")).expect("drone1.tlog");
     assert!(tlog.len() > 1000 && tlog[8] == 0xFD, "{} bytes", tlog.len());
+    replay_reproduces_the_map(&out);
     std::fs::remove_dir_all(&out).ok();
+}
+
+/// `gcs replay` on the mission's log maps the recorded frames on the recorded true poses again
+/// and gets the mission's map; a log cut short (a crash) still replays; a file that is no log
+/// is refused with a reason.
+fn replay_reproduces_the_map(out: &Path) {
+    let log = out.join("mission.mcap");
+    let replay = |log: &Path, dir: &str| {
+        let dir = out.join(dir);
+        let run = gcs(&[
+            "replay",
+            log.to_str().expect("utf-8 path"),
+            "--truth-poses",
+            "--json",
+            "--out",
+            dir.to_str().expect("utf-8 path"),
+        ]);
+        let stderr = String::from_utf8_lossy(&run.stderr).into_owned();
+        (run.status.success(), run.stdout, stderr, dir)
+    };
+    let (ok, stdout, stderr, dir) = replay(&log, "replay");
+    assert!(ok, "{stderr}");
+    let r: serde_json::Value = serde_json::from_slice(&stdout).expect("JSON");
+    assert_eq!(r["truncated"], false, "{r}");
+    assert!(number(&r["frames"]) > 1000.0, "{r}");
+    assert!(number(&r["map"]["agreement"]) >= 0.99, "{r}");
+    assert!(nav::grid::Grid::load(dir.join("map.yaml")).is_ok());
+    // The first 60 % of the file, as a writer killed mid-mission leaves it.
+    let bytes = std::fs::read(&log).expect("mission.mcap");
+    let cut = out.join("cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() * 3 / 5]).expect("write");
+    let (ok, stdout, stderr, _) = replay(&cut, "replay-cut");
+    assert!(ok, "{stderr}");
+    let r: serde_json::Value = serde_json::from_slice(&stdout).expect("JSON");
+    assert_eq!(r["truncated"], true, "{r}");
+    assert!(number(&r["frames"]) > 100.0, "{r}");
+    // Not a log at all.
+    let (ok, _, stderr, _) = replay(&out.join("map.yaml"), "replay-bad");
+    assert!(!ok);
+    assert!(stderr.contains("is not an MCAP file"), "{stderr}");
 }
 
 #[test]

@@ -236,6 +236,7 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
                 t: f.stamp,
                 drone: k,
                 frame: f.frame.clone(),
+                truth: f.truth,
             });
         }
         if k >= n {
@@ -246,7 +247,7 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
             continue;
         }
         let known = slam.config().known_poses;
-        let Some(frame) = to_slam_frame(&f, sensors.at(k, f.stamp), known) else {
+        let Some(frame) = slam_frame(&f, sensors.at(k, f.stamp), known) else {
             tracing::warn!(drone = k + 1, "malformed camera frame dropped");
             continue;
         };
@@ -298,8 +299,8 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
 }
 
 /// The SLAM's input for a camera frame and the vehicle's sample at its time (with the true
-/// camera pose only when the SLAM maps on known poses).
-fn to_slam_frame(f: &CameraFrame, sample: Option<SensorSample>, known: bool) -> Option<Frame> {
+/// camera pose only when the SLAM maps on known poses); `None` for a frame of the wrong size.
+pub fn slam_frame(f: &CameraFrame, sample: Option<SensorSample>, known: bool) -> Option<Frame> {
     let rgb = image::RgbImage::from_raw(f.frame.width, f.frame.height, f.frame.rgb.clone())?;
     let grey = image::DynamicImage::ImageRgb8(rgb).into_luma8();
     let i = f.frame.intrinsics;
