@@ -224,7 +224,6 @@ pub fn run(args: &ExploreArgs) -> anyhow::Result<()> {
     } else {
         let r = Recorder::create(&args.out.join("mission.mcap"))?;
         let b = sim_body_from_camera();
-        let (t, q) = (b.translation.vector, b.rotation);
         r.send(Record::Setup(Setup {
             version: 1,
             world: Some(world.name().into()),
@@ -232,12 +231,7 @@ pub fn run(args: &ExploreArgs) -> anyhow::Result<()> {
             drones: fleet
                 .drones
                 .iter()
-                .map(|d| SetupDrone {
-                    name: d.name.clone(),
-                    start: d.start,
-                    body_from_camera: [t.x, t.y, t.z, q.i, q.j, q.k, q.w],
-                    altitude: d.altitude,
-                })
+                .map(|d| SetupDrone::new(&d.name, d.start, &b, d.altitude))
                 .collect(),
         }));
         Some(r)

@@ -110,14 +110,7 @@ impl SimFleet {
             clock: sitl.clock(),
             speed: config.speed,
         });
-        let starts: Vec<[f64; 3]> = sitl.with_sim(|sim| {
-            (0..sim.len())
-                .map(|k| {
-                    let s = sim.vehicle(k).state();
-                    [s.position[0], s.position[1], s.yaw]
-                })
-                .collect()
-        });
+        let starts: Vec<[f64; 3]> = sitl.starts();
         let mut drones = vec![];
         for (k, addr) in sitl.endpoint_addrs().iter().enumerate() {
             let port = addr
@@ -132,6 +125,7 @@ impl SimFleet {
                 &format!("tcpout:127.0.0.1:{port}"),
                 config.speed,
                 tlog.as_deref(),
+                None,
             )
             .with_context(|| format!("drone {}", k + 1))?;
             drones.push(DroneSpec {
@@ -216,6 +210,7 @@ pub fn connect(
     address: &str,
     speed: f64,
     tlog: Option<&std::path::Path>,
+    channel_map: Option<link::ChannelMap>,
 ) -> anyhow::Result<Arc<dyn VehicleLink>> {
     let address = address.parse()?;
     let link: Arc<dyn VehicleLink> = match kind {
@@ -225,6 +220,8 @@ pub fn connect(
                 MavlinkConfig {
                     heartbeat_period: Duration::from_secs_f64(1.0 / speed),
                     rc_rate_hz: (20.0 * speed).min(400.0),
+                    channel_map: channel_map
+                        .unwrap_or_else(|| MavlinkConfig::default().channel_map),
                     ..MavlinkConfig::default()
                 },
             )?;
@@ -242,6 +239,7 @@ pub fn connect(
             ShieldConfig {
                 rc_rate_hz: 50.0,
                 heartbeat_period: Duration::from_secs_f64((0.2 / speed).max(0.05)),
+                channel_map: channel_map.unwrap_or_else(|| ShieldConfig::default().channel_map),
                 ..ShieldConfig::default()
             },
         )?),

@@ -1,6 +1,7 @@
 //! `gcs`: the ground control station.
 
 mod explore;
+mod fly;
 mod plan;
 mod probe;
 mod replay;
@@ -26,6 +27,8 @@ struct Cli {
 enum Top {
     /// Explore a simulated building with several drones, end to end (the main job).
     Explore(explore::ExploreArgs),
+    /// Explore with real or external vehicles listed in a fleet file (FLEET.toml).
+    Fly(fly::FlyArgs),
     /// Rerun the SLAM on a recorded mission (MCAP) and report how the result differs.
     Replay(replay::ReplayArgs),
     /// One mission-planner step on a map: frontiers, assignment, paths.
@@ -59,6 +62,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Top::Explore(args) => explore::run(&args),
+        Top::Fly(args) => fly::run(&args),
         Top::Replay(args) => replay::run(&args),
         Top::Plan(args) => plan::run(&args),
         Top::Slam { command } => slam_cmd::run(&command),

@@ -56,6 +56,27 @@ pub struct SetupDrone {
     pub altitude: f64,
 }
 
+impl SetupDrone {
+    /// A drone as recorded, with its camera mount as an isometry.
+    pub fn new(
+        name: &str,
+        start: Option<[f64; 3]>,
+        body_from_camera: &nalgebra::Isometry3<f64>,
+        altitude: f64,
+    ) -> Self {
+        let (t, q) = (
+            body_from_camera.translation.vector,
+            body_from_camera.rotation,
+        );
+        Self {
+            name: name.to_owned(),
+            start,
+            body_from_camera: [t.x, t.y, t.z, q.i, q.j, q.k, q.w],
+            altitude,
+        }
+    }
+}
+
 /// The state of one drone at one control tick, as written on `/droneK/state`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DroneState {

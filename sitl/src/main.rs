@@ -197,8 +197,9 @@ fn run(args: RunArgs) -> anyhow::Result<()> {
             "max".into()
         }
     )?;
+    let starts: Vec<[f64; 3]> = sitl.starts();
     for (k, (spec, local)) in args.vehicles.iter().zip(sitl.endpoint_addrs()).enumerate() {
-        let [x, y] = world.starts()[k];
+        let [x, y, yaw] = starts[k];
         let what = match spec.protocol {
             Protocol::Mavlink => format!("MAVLink ArduCopter, system id {}", k + 1),
             Protocol::Shield => "I/O shield + Naza".to_owned(),
@@ -209,7 +210,7 @@ fn run(args: RunArgs) -> anyhow::Result<()> {
         );
         writeln!(
             out,
-            "sitl: vehicle {}: {what} on {at}, start ({x:.2}, {y:.2})",
+            "sitl: vehicle {}: {what} on {at}, start [{x:.2}, {y:.2}, {yaw:.3}] (x, y, yaw)",
             k + 1
         )?;
     }

@@ -240,6 +240,19 @@ impl Sitl {
         Duration::from_micros(self.shared.time_us.load(Ordering::Relaxed))
     }
 
+    /// Every vehicle's pose now as x, y (metres) and yaw (radians): at the start, where each
+    /// one starts (a station needs them to anchor its map).
+    pub fn starts(&self) -> Vec<[f64; 3]> {
+        self.with_sim(|sim| {
+            (0..sim.len())
+                .map(|k| {
+                    let s = sim.vehicle(k).state();
+                    [s.position[0], s.position[1], s.yaw]
+                })
+                .collect()
+        })
+    }
+
     /// A handle that reads simulated time from any thread, for as long as it is held.
     pub fn clock(&self) -> SimClock {
         SimClock(self.shared.clone())

@@ -1,0 +1,411 @@
+//! `gcs fly --config FLEET.toml`: the mission on real or external vehicles — each reached at
+//! its own address over MAVLink or the shield protocol, its camera read from a TCP frame stream
+//! (`link/CAMERA.md`), all on the wall clock. `sitl run` in another process is such a fleet, and
+//! so is ArduPilot SITL given a camera (see the README).
+//!
+//! ```toml
+//! [[vehicle]]
+//! name = "alpha"                       # optional; "drone K" otherwise
+//! protocol = "mavlink"                 # or "shield"
+//! address = "tcpout:127.0.0.1:5760"    # as everywhere: serial:, tcpout:, tcpin:, udpin:, udpout:
+//! camera = "tcpout:127.0.0.1:5900"     # the TCP frame stream carrying its camera
+//! camera_id = 0                        # its vehicle id in that stream (default: its order there)
+//! start = [1.0, 7.5, 0.0]              # x, y (metres), yaw (radians) in the map, if known
+//! altitude = 0.9                       # its altitude band, metres (default 0.9 + 0.15·K)
+//! channels = "ardupilot"               # or "thesis" (the thesis's reversed Naza wiring)
+//! ```
+
+use std::collections::BTreeMap;
+use std::io::BufReader;
+use std::net::TcpStream;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::mpsc::{SyncSender, sync_channel};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use clap::Args;
+use link::camera::RgbdFrame;
+use link::{Address, ChannelMap};
+use serde::Deserialize;
+use slam::system::{RobotSetup, Slam, SlamConfig};
+
+use gcs::clock::{Clock, WallClock};
+use gcs::fleet::{LinkKind, altitude_band, connect, sim_body_from_camera};
+use gcs::outputs;
+use gcs::record::{Record, Recorder, Setup, SetupDrone};
+use gcs::runtime::drone::{DroneSpec, StartSequence};
+use gcs::runtime::perception::CameraFrame;
+use gcs::runtime::{Operator, Outcome, Runtime, RuntimeConfig};
+
+/// Arguments of `gcs fly`.
+#[derive(Args, Debug, Clone)]
+pub struct FlyArgs {
+    /// The fleet: one `[[vehicle]]` table per drone (see `gcs fly --help` and the README).
+    #[arg(long)]
+    pub config: PathBuf,
+    /// Give up (and land) after this many seconds.
+    #[arg(long, default_value_t = 900.0)]
+    pub timeout: f64,
+    /// Where to write the map, trajectories, log and summary.
+    #[arg(long, default_value = "fly-out")]
+    pub out: PathBuf,
+    /// Print the summary as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
+    /// Do not record the MCAP log and `.tlog`s.
+    #[arg(long)]
+    pub no_log: bool,
+}
+
+/// The fleet file.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FleetFile {
+    #[serde(default)]
+    vehicle: Vec<VehicleEntry>,
+}
+
+/// One `[[vehicle]]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct VehicleEntry {
+    name: Option<String>,
+    protocol: String,
+    address: String,
+    camera: String,
+    camera_id: Option<u8>,
+    start: Option<[f64; 3]>,
+    altitude: Option<f64>,
+    channels: Option<String>,
+}
+
+/// A vehicle of the fleet, checked.
+struct Vehicle {
+    name: String,
+    kind: LinkKind,
+    address: String,
+    camera: Address,
+    camera_id: u8,
+    start: Option<[f64; 3]>,
+    altitude: f64,
+    channels: Option<ChannelMap>,
+}
+
+/// The end of a flight, as written to `summary.json`.
+#[derive(Debug, serde::Serialize)]
+struct FlySummary {
+    completed: bool,
+    outcome: String,
+    exploration_time_s: f64,
+    loop_closures: usize,
+    keyframes: usize,
+    drones: Vec<FlyDrone>,
+}
+
+#[derive(Debug, serde::Serialize)]
+struct FlyDrone {
+    id: usize,
+    name: String,
+    /// Distance flown according to its filter, metres.
+    path_length_m: f64,
+    camera_frames: usize,
+    lost_frames: usize,
+    final_phase: &'static str,
+}
+
+/// Reads and checks a fleet file; every error names the vehicle and the field.
+fn load_fleet(path: &Path) -> anyhow::Result<Vec<Vehicle>> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read the fleet file {}", path.display()))?;
+    let file: FleetFile =
+        toml::from_str(&text).with_context(|| format!("{} is not a fleet file", path.display()))?;
+    if file.vehicle.is_empty() || file.vehicle.len() > 8 {
+        bail!(
+            "{}: {} [[vehicle]] tables; a fleet has 1 to 8",
+            path.display(),
+            file.vehicle.len()
+        );
+    }
+    let mut per_camera: BTreeMap<String, u8> = BTreeMap::new();
+    file.vehicle
+        .into_iter()
+        .enumerate()
+        .map(|(k, v)| {
+            let which = format!("{}: vehicle {}", path.display(), k + 1);
+            let kind = match v.protocol.as_str() {
+                "mavlink" => LinkKind::Mavlink,
+                "shield" => LinkKind::Shield,
+                other => bail!("{which}: protocol {other:?} must be \"mavlink\" or \"shield\""),
+            };
+            v.address
+                .parse::<Address>()
+                .with_context(|| format!("{which}: address"))?;
+            let camera: Address = v
+                .camera
+                .parse()
+                .with_context(|| format!("{which}: camera"))?;
+            let order = per_camera.entry(v.camera.clone()).or_insert(0);
+            let camera_id = v.camera_id.unwrap_or(*order);
+            *order += 1;
+            if let Some(s) = v.start
+                && !s.iter().all(|x| x.is_finite())
+            {
+                bail!("{which}: start {s:?} must be finite x, y, yaw");
+            }
+            let altitude = v.altitude.unwrap_or_else(|| altitude_band(k));
+            if !(altitude.is_finite() && (0.3..=2.5).contains(&altitude)) {
+                bail!("{which}: altitude {altitude} must be 0.3 to 2.5 metres");
+            }
+            let channels = match v.channels.as_deref() {
+                None => None,
+                Some("ardupilot") => Some(ChannelMap::ardupilot()),
+                Some("thesis") => Some(ChannelMap::thesis_naza()),
+                Some(other) => {
+                    bail!("{which}: channels {other:?} must be \"ardupilot\" or \"thesis\"")
+                }
+            };
+            Ok(Vehicle {
+                name: v.name.unwrap_or_else(|| format!("drone {}", k + 1)),
+                kind,
+                address: v.address,
+                camera,
+                camera_id,
+                start: v.start,
+                altitude,
+                channels,
+            })
+        })
+        .collect()
+}
+
+/// Runs `gcs fly`.
+pub fn run(args: &FlyArgs) -> anyhow::Result<()> {
+    if !(args.timeout.is_finite() && args.timeout > 0.0) {
+        bail!(
+            "--timeout {} must be a positive number of seconds",
+            args.timeout
+        );
+    }
+    let fleet = load_fleet(&args.config)?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create the output folder {}", args.out.display()))?;
+    let clock: Arc<dyn Clock> = Arc::new(WallClock::start());
+    // Cameras first (a vehicle is no use without one), then the links.
+    let (tx, frames) = sync_channel(8);
+    let mut streams: BTreeMap<String, Vec<(u8, usize)>> = BTreeMap::new();
+    for (k, v) in fleet.iter().enumerate() {
+        streams
+            .entry(v.camera.to_string())
+            .or_default()
+            .push((v.camera_id, k));
+    }
+    for (address, routes) in streams {
+        start_camera(&address, routes, tx.clone(), clock.clone())?;
+    }
+    drop(tx);
+    let mut drones = vec![];
+    for (k, v) in fleet.iter().enumerate() {
+        let tlog = (!args.no_log && v.kind == LinkKind::Mavlink)
+            .then(|| args.out.join(format!("drone{}.tlog", k + 1)));
+        let link = connect(v.kind, &v.address, 1.0, tlog.as_deref(), v.channels)
+            .with_context(|| format!("{} at {}", v.name, v.address))?;
+        drones.push(DroneSpec {
+            name: v.name.clone(),
+            link,
+            start_sequence: match v.kind {
+                LinkKind::Mavlink => StartSequence::Mavlink,
+                LinkKind::Shield => StartSequence::Shield,
+            },
+            altitude: v.altitude,
+            start: v.start,
+        });
+    }
+    let body_from_camera = sim_body_from_camera();
+    let setups: Vec<RobotSetup> = fleet
+        .iter()
+        .map(|v| RobotSetup {
+            body_from_camera,
+            start: v.start.map(|s| {
+                nalgebra::Isometry3::new(
+                    nalgebra::Vector3::new(s[0], s[1], 0.0),
+                    nalgebra::Vector3::z() * s[2],
+                )
+            }),
+        })
+        .collect();
+    let recorder = if args.no_log {
+        None
+    } else {
+        let r = Recorder::create(&args.out.join("mission.mcap"))?;
+        r.send(Record::Setup(Setup {
+            version: 1,
+            world: None,
+            strategy: "hungarian".into(),
+            drones: fleet
+                .iter()
+                .map(|v| SetupDrone::new(&v.name, v.start, &body_from_camera, v.altitude))
+                .collect(),
+        }));
+        Some(r)
+    };
+    let runtime = Runtime::start(
+        RuntimeConfig {
+            timeout: Some(args.timeout),
+            ..RuntimeConfig::default()
+        },
+        drones,
+        Slam::new(SlamConfig::default(), setups),
+        frames,
+        clock.clone(),
+        recorder,
+    )?;
+    // Ctrl-C lands every drone (a second one is the operator's to give, as ever).
+    let commander = runtime.commander();
+    if let Err(e) = ctrlc::set_handler(move || {
+        eprintln!("fly: Ctrl-C: landing every drone");
+        let _ = commander.send(Operator::LandAll);
+    }) {
+        tracing::warn!("Ctrl-C will not land the drones: {e}");
+    }
+    eprintln!(
+        "fly: {} vehicle(s) connected; exploring (Ctrl-C lands all)",
+        fleet.len()
+    );
+    let started = Instant::now();
+    let mut next = Duration::ZERO;
+    while !runtime.finished() {
+        if started.elapsed() >= next {
+            next += Duration::from_secs(5);
+            let s = runtime.snapshot();
+            let states: Vec<String> = s
+                .drones
+                .iter()
+                .map(|d| format!("{}: {} ({:?})", d.name, d.phase.name(), d.slam))
+                .collect();
+            eprintln!(
+                "[{:6.1} s] {}  {} keyframes, {} loops",
+                s.elapsed,
+                states.join(", "),
+                s.slam.stats.keyframes,
+                s.slam.stats.loop_closures
+            );
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let report = runtime
+        .join()
+        .context("the mission loop stopped unexpectedly")?;
+    let perception = report
+        .perception
+        .context("the SLAM thread stopped unexpectedly")?;
+    let voxels = perception.slam.map().snapshot();
+    if let Some(g) = voxels.project() {
+        outputs::write_map(&args.out, &g)?;
+        let tracks: Vec<Vec<[f64; 2]>> = report
+            .drones
+            .iter()
+            .map(|d| d.trajectory.iter().map(|(_, p)| [p[0], p[1]]).collect())
+            .collect();
+        outputs::write_picture(&args.out.join("map.png"), &g, &tracks)?;
+    }
+    outputs::write_ply(&args.out.join("map.ply"), &voxels)?;
+    for k in 0..fleet.len() {
+        outputs::write_trajectory(
+            &args.out.join(format!("drone{}.tum", k + 1)),
+            &perception.slam.trajectory(k),
+        )?;
+    }
+    let stats = perception.slam.stats();
+    let summary = FlySummary {
+        completed: report.outcome == Some(Outcome::Completed),
+        outcome: report.outcome.map_or("stopped", Outcome::name).into(),
+        exploration_time_s: report.mission_time_s,
+        loop_closures: stats.loop_closures,
+        keyframes: stats.keyframes,
+        drones: report
+            .drones
+            .iter()
+            .enumerate()
+            .map(|(k, d)| {
+                let e = perception.slam.estimate(k);
+                FlyDrone {
+                    id: k + 1,
+                    name: d.name.clone(),
+                    path_length_m: d.path_length_m,
+                    camera_frames: e.as_ref().map_or(0, |e| e.frames),
+                    lost_frames: e.as_ref().map_or(0, |e| e.lost_frames),
+                    final_phase: d.phase.name(),
+                }
+            })
+            .collect(),
+    };
+    outputs::write_json(&args.out.join("summary.json"), &summary)?;
+    if args.json {
+        println!("{}", serde_json::to_string(&summary)?);
+    } else {
+        println!(
+            "{} after {:.0} s: {} keyframes, {} loops; outputs in {}",
+            summary.outcome,
+            summary.exploration_time_s,
+            summary.keyframes,
+            summary.loop_closures,
+            args.out.display()
+        );
+    }
+    Ok(())
+}
+
+/// Reads one camera stream in its own thread and routes its frames to the fleet's drones
+/// (stamped on arrival with the mission clock). Reconnects when the stream drops.
+fn start_camera(
+    address: &str,
+    routes: Vec<(u8, usize)>,
+    tx: SyncSender<CameraFrame>,
+    clock: Arc<dyn Clock>,
+) -> anyhow::Result<()> {
+    let Some(host) = address.strip_prefix("tcpout:") else {
+        bail!("camera {address}: the frame stream is read with tcpout:HOST:PORT");
+    };
+    let host = host.to_owned();
+    let address = address.to_owned();
+    std::thread::Builder::new()
+        .name(format!("camera {host}"))
+        .spawn(move || {
+            loop {
+                match TcpStream::connect(&host) {
+                    Ok(stream) => {
+                        let _ = stream.set_nodelay(true);
+                        let mut reader = BufReader::new(stream);
+                        loop {
+                            match RgbdFrame::read_from(&mut reader) {
+                                Ok(frame) => {
+                                    let Some(&(_, drone)) =
+                                        routes.iter().find(|(id, _)| *id == frame.vehicle)
+                                    else {
+                                        continue;
+                                    };
+                                    let f = CameraFrame {
+                                        drone,
+                                        stamp: clock.now(),
+                                        frame: Arc::new(frame),
+                                        truth: None,
+                                    };
+                                    if tx.send(f).is_err() {
+                                        return;
+                                    }
+                                }
+                                Err(e) => {
+                                    tracing::warn!("camera {address}: {e}; reconnecting");
+                                    break;
+                                }
+                            }
+                        }
+                    }
+                    Err(e) => tracing::debug!("camera {address}: {e}"),
+                }
+                std::thread::sleep(Duration::from_millis(500));
+            }
+        })?;
+    Ok(())
+}
