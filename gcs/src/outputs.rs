@@ -8,20 +8,9 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use image::Rgb;
 use nav::grid::Grid;
+use nav::render::ROBOT_COLOURS;
 use slam::occupancy::VoxelMap;
 use slam::trajectory::Stamped;
-
-/// Colours of the drones' trajectories, by drone.
-pub const ROUTE_COLOURS: [[u8; 3]; 8] = [
-    [220, 40, 40],
-    [40, 90, 220],
-    [20, 160, 60],
-    [230, 140, 0],
-    [150, 50, 200],
-    [0, 170, 170],
-    [200, 60, 140],
-    [110, 110, 20],
-];
 
 /// `dir/.name.partial`: where `path` is written before it is renamed into place.
 fn partial(path: &Path) -> PathBuf {
@@ -70,7 +59,7 @@ pub fn write_picture(path: &Path, grid: &Grid, tracks: &[Vec<[f64; 2]>]) -> anyh
         )
     };
     for (k, track) in tracks.iter().enumerate() {
-        let c = ROUTE_COLOURS[k % ROUTE_COLOURS.len()];
+        let c = ROBOT_COLOURS[k % ROBOT_COLOURS.len()];
         for pair in track.windows(2) {
             imageproc::drawing::draw_line_segment_mut(
                 &mut img,

@@ -7,8 +7,8 @@ use crate::frontier::is_frontier_cell;
 use crate::grid::Grid;
 use crate::mission::Plan;
 
-/// Colours of robots 0, 1, 2, … (cycled).
-const ROBOT_COLOURS: [[u8; 3]; 8] = [
+/// Colours of robots 0, 1, 2, … (cycled), in every picture of robots.
+pub const ROBOT_COLOURS: [[u8; 3]; 8] = [
     [220, 40, 40],
     [40, 90, 220],
     [20, 160, 60],
