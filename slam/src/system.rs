@@ -411,10 +411,12 @@ struct Done {
 
 /// Runs a job: optimise, then flag the loop closures that still disagree.
 fn run_job(mut job: Job, options: &Options, reject_chi2: f64) -> Done {
-    let result = optimize(&mut job.graph, options);
+    let initial = job.graph.poses.clone();
+    let mut result = optimize(&mut job.graph, options);
     let mut rejected = vec![];
     if result.is_ok() {
         let mut e = [0.0; 6];
+        let mut bad = vec![];
         for &(edge, link) in &job.loops {
             let ed = &job.graph.edges[edge];
             Isometry3::error(
@@ -425,7 +427,18 @@ fn run_job(mut job: Job, options: &Options, reject_chi2: f64) -> Done {
             );
             if crate::posegraph::quad(&ed.info, &e, 6) > reject_chi2 {
                 rejected.push(link);
+                bad.push(edge);
             }
+        }
+        if !bad.is_empty() {
+            // Those closures pulled on every pose before the check caught them: optimise again
+            // without them, from where this job started, so no published pose carries them.
+            bad.sort_unstable();
+            for edge in bad.into_iter().rev() {
+                job.graph.edges.remove(edge);
+            }
+            job.graph.poses = initial;
+            result = optimize(&mut job.graph, options);
         }
     }
     Done {

@@ -64,7 +64,10 @@ def main():
 
     pump(1.0)
     master.set_mode("ALT_HOLD")
-    pump(1.0)
+    # The mode shows in the vehicle's next heartbeat (1 Hz): wait for it, up to 5 s.
+    deadline = time.time() + 5
+    while master.flightmode != "ALT_HOLD" and time.time() < deadline:
+        pump(0.2)
     report["mode_after_set"] = master.flightmode
     if master.flightmode != "ALT_HOLD":
         report["error"] = "mode did not change to ALT_HOLD"
