@@ -241,12 +241,7 @@ impl Autopilot {
                 }
             }
             MavMessage::PARAM_REQUEST_READ(p) if self.for_me(p.target_system) => {
-                let name = p
-                    .param_id
-                    .to_str()
-                    .unwrap_or("")
-                    .trim_end_matches('\0')
-                    .to_owned();
+                let name = param_name(&p.param_id);
                 let i = if p.param_index >= 0 {
                     Some(p.param_index as usize).filter(|i| *i < self.params.len())
                 } else {
@@ -257,12 +252,7 @@ impl Autopilot {
                 }
             }
             MavMessage::PARAM_SET(p) if self.for_me(p.target_system) => {
-                let name = p
-                    .param_id
-                    .to_str()
-                    .unwrap_or("")
-                    .trim_end_matches('\0')
-                    .to_owned();
+                let name = param_name(&p.param_id);
                 if let Some(i) = self.params.iter().position(|(n, _)| *n == name) {
                     if name != "SYSID_THISMAV" && p.param_value.is_finite() {
                         self.params[i].1 = p.param_value;
@@ -758,6 +748,11 @@ impl Autopilot {
             _ => return None,
         })
     }
+}
+
+/// A parameter's name as a station sent it (NUL-padded, possibly not UTF-8: then empty).
+fn param_name(id: &mavlink::types::CharArray<16>) -> String {
+    id.to_str().unwrap_or("").trim_end_matches('\0').to_owned()
 }
 
 #[cfg(test)]

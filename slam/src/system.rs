@@ -1164,18 +1164,9 @@ impl Slam {
         let mut added = 0;
         for m in chosen {
             let estimate = self.nodes[m].pose.inverse() * self.nodes[n].pose;
-            let Ok(reg) = register(
-                &self.nodes[m].observation,
-                &self.nodes[n].observation,
-                Some(&estimate),
-                &self.config.frontend,
-                (n as u64) << 20 | m as u64,
-            ) else {
+            let Some(reg) = self.verify(m, n, Some(&estimate)) else {
                 continue;
             };
-            if reg.inliers < self.config.loop_min_inliers {
-                continue;
-            }
             let correction = estimate.inverse() * reg.reference_from_frame;
             if correction.translation.vector.norm() > self.config.loop_max_correction
                 || correction.rotation.angle() > self.config.loop_max_correction_angle
@@ -1194,6 +1185,20 @@ impl Slam {
         added
     }
 
+    /// Keyframe `n` registered against keyframe `m` (guided by `guess`, m ← n), when the match
+    /// has enough inliers for a loop closure or a merge.
+    fn verify(&self, m: usize, n: usize, guess: Option<&Isometry3<f64>>) -> Option<Registration> {
+        register(
+            &self.nodes[m].observation,
+            &self.nodes[n].observation,
+            guess,
+            &self.config.frontend,
+            (n as u64) << 20 | m as u64,
+        )
+        .ok()
+        .filter(|reg| reg.inliers >= self.config.loop_min_inliers)
+    }
+
     /// Verifies look-alike keyframes of other coordinate frames; merges two frames once two
     /// matches agree on how they relate. Returns (kept, absorbed) after a merge.
     fn anchor_frames(&mut self, n: usize) -> Option<(usize, usize)> {
@@ -1209,18 +1214,9 @@ impl Slam {
             |m| nodes[m].frame != frame,
         );
         for (m, _) in candidates {
-            let Ok(reg) = register(
-                &self.nodes[m].observation,
-                &self.nodes[n].observation,
-                None,
-                &self.config.frontend,
-                (n as u64) << 20 | m as u64,
-            ) else {
+            let Some(reg) = self.verify(m, n, None) else {
                 continue;
             };
-            if reg.inliers < self.config.loop_min_inliers {
-                continue;
-            }
             // How the two frames relate, from the match m ← n: F_m ← F_n.
             let m_from_n = reg.reference_from_frame;
             let fm_from_fn = self.nodes[m].pose * m_from_n * self.nodes[n].pose.inverse();
