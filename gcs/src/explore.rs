@@ -20,9 +20,12 @@ use slam::trajectory::Stamped;
 
 use gcs::evaluate::{WallError, coverage, reachable_free, wall_error};
 use gcs::fleet::{LinkKind, SimFleet, SimFleetConfig, sim_body_from_camera};
+use gcs::gui::{self, Station};
 use gcs::outputs;
 use gcs::record::{Record, Recorder, Setup, SetupDrone};
-use gcs::runtime::{MissionState, Outcome, Runtime, RuntimeConfig};
+use gcs::runtime::{MissionState, Operator, Outcome, Runtime, RuntimeConfig};
+
+use crate::gui_cmd::WindowArgs;
 
 /// Arguments of `gcs explore`.
 #[derive(Args, Debug, Clone)]
@@ -65,6 +68,12 @@ pub struct ExploreArgs {
     /// demonstrations; the others must finish the map).
     #[arg(long, value_name = "K@T")]
     pub kill_link: Option<String>,
+    /// Show the run in the operator's window (the run goes on headless if it is closed).
+    #[arg(long)]
+    pub gui: bool,
+    /// Scripted use of the window.
+    #[command(flatten)]
+    pub window: WindowArgs,
 }
 
 /// Where the runtime's poses come from.
@@ -83,6 +92,16 @@ pub enum StrategyArg {
     Hungarian,
     /// Cheapest pair first.
     Greedy,
+}
+
+impl PoseSource {
+    /// What the summary and the title call it.
+    pub fn name(self) -> &'static str {
+        match self {
+            PoseSource::Slam => "SLAM",
+            PoseSource::Truth => "ground truth",
+        }
+    }
 }
 
 impl StrategyArg {
@@ -159,6 +178,7 @@ pub struct DroneSummary {
 }
 
 fn validate(args: &ExploreArgs) -> anyhow::Result<Option<(usize, f64)>> {
+    args.window.validate()?;
     if !(1..=8).contains(&args.drones) {
         bail!("--drones {} must be 1 to 8", args.drones);
     }
@@ -195,7 +215,19 @@ fn validate(args: &ExploreArgs) -> anyhow::Result<Option<(usize, f64)>> {
 
 /// Runs `gcs explore`.
 pub fn run(args: &ExploreArgs) -> anyhow::Result<()> {
+    let window = args.gui.then(|| Window {
+        wait_for_start: false,
+        close_ends_session: false,
+        options: args.window.options(),
+    });
+    run_with(args, window)
+}
+
+/// Runs the exploration, in a window if one is given (`gcs explore --gui`, `gcs gui`).
+pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()> {
     let kill = validate(args)?;
+    let waits = window.as_ref().is_some_and(|w| w.wait_for_start);
+    let session = window.as_ref().is_some_and(|w| w.close_ends_session);
     let world = Arc::new(World::load(&args.world)?);
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create the output folder {}", args.out.display()))?;
@@ -213,10 +245,7 @@ pub fn run(args: &ExploreArgs) -> anyhow::Result<()> {
         args.drones,
         args.link.name(),
         args.strategy.name(),
-        match args.poses {
-            PoseSource::Slam => "SLAM",
-            PoseSource::Truth => "ground truth",
-        },
+        args.poses.name(),
         args.speed
     );
     let recorder = if args.no_log {
@@ -254,8 +283,10 @@ pub fn run(args: &ExploreArgs) -> anyhow::Result<()> {
         RuntimeConfig {
             strategy: args.strategy.strategy(),
             timeout: Some(args.timeout),
-            auto_start: true,
-            exit_when_done: true,
+            // In the window the operator starts the mission (again, after a landing), and the
+            // runtime lasts until the window closes.
+            auto_start: !waits,
+            exit_when_done: !session,
             ..RuntimeConfig::default()
         },
         drones,
@@ -264,8 +295,68 @@ pub fn run(args: &ExploreArgs) -> anyhow::Result<()> {
         clock.clone(),
         recorder,
     )?;
-    // Watch: progress, the true trajectories, and the fault if one was asked for.
-    let reachable = reachable_free(&world);
+    let Some(window) = window else {
+        return watch(args, &world, sitl, runtime, clock, kill);
+    };
+    let station = Station::of(
+        &runtime,
+        Some(world.clone()),
+        format!(
+            "{} drone(s) in SITL '{}' over {}, poses from {}, {}× real time",
+            args.drones,
+            world.name(),
+            args.link.name(),
+            args.poses.name(),
+            args.speed
+        ),
+    );
+    let commander = runtime.commander();
+    let worker = {
+        let (args, world) = (args.clone(), world.clone());
+        std::thread::Builder::new()
+            .name("explore".into())
+            .spawn(move || watch(&args, &world, sitl, runtime, clock, kill))?
+    };
+    let shown = gui::run_window(station, window.options);
+    if window.close_ends_session || shown.is_err() {
+        // `gcs gui`: closing the window ends the session; everything lands first.
+        let _ = commander.send(Operator::Shutdown);
+    } else {
+        eprintln!("explore: window closed; the run goes on headless");
+    }
+    let result = worker
+        .join()
+        .map_err(|_| anyhow::anyhow!("the exploration thread panicked"))?;
+    shown.map_err(|e| {
+        anyhow::anyhow!(
+            "cannot show the window: {e} (is there a display? Without one, run under `xvfb-run`)"
+        )
+    })?;
+    result
+}
+
+/// The window of an exploration.
+pub struct Window {
+    /// Wait for the operator's start (`gcs gui`), or start at once (`gcs explore --gui`).
+    pub wait_for_start: bool,
+    /// Closing the window lands every drone and ends the session (`gcs gui`); otherwise the run
+    /// goes on headless (`gcs explore --gui`).
+    pub close_ends_session: bool,
+    /// Scripted use of the window.
+    pub options: gui::WindowOptions,
+}
+
+/// Watches a running exploration to its end (progress, ground truth, the fault if one was
+/// asked for), then writes the outputs and prints the summary.
+fn watch(
+    args: &ExploreArgs,
+    world: &World,
+    sitl: sitl::Sitl,
+    runtime: Runtime,
+    clock: Arc<dyn gcs::clock::Clock>,
+    kill: Option<(usize, f64)>,
+) -> anyhow::Result<()> {
+    let reachable = reachable_free(world);
     let wall = Instant::now();
     let t0 = clock.now();
     let mut truth_tracks: Vec<Vec<(f64, [f64; 4])>> = vec![vec![]; args.drones];
@@ -276,9 +367,11 @@ pub fn run(args: &ExploreArgs) -> anyhow::Result<()> {
     let mut killed = false;
     while !runtime.finished() {
         let now = clock.now();
+        let s = runtime.snapshot();
+        // Mission time: from the operator's start (at once when headless).
+        let elapsed = s.elapsed;
         if now >= next_truth {
             next_truth += 0.1;
-            let s = runtime.snapshot();
             for (k, p) in truth(&sitl).into_iter().enumerate() {
                 truth_tracks[k].push((now, p));
                 if let Some(e) = s
@@ -293,23 +386,22 @@ pub fn run(args: &ExploreArgs) -> anyhow::Result<()> {
         }
         if let Some((k, at)) = kill
             && !killed
-            && now - t0 >= at
+            && s.state != MissionState::Waiting
+            && elapsed >= at
         {
             eprintln!(
-                "explore: killing drone {}'s link at {:.0} s (--kill-link)",
+                "explore: killing drone {}'s link at {elapsed:.0} s (--kill-link)",
                 k + 1,
-                now - t0
             );
             sitl.kill_endpoint(k);
             killed = true;
         }
-        if now >= next_progress {
-            next_progress += 5.0;
-            let s = runtime.snapshot();
+        if now >= next_progress && s.state != MissionState::Waiting {
+            next_progress = now + 5.0;
             let cov = s
                 .grid
                 .as_ref()
-                .map_or(0.0, |g| coverage(&reachable, &world, g));
+                .map_or(0.0, |g| coverage(&reachable, world, g));
             let states: Vec<String> = s
                 .drones
                 .iter()
@@ -317,7 +409,7 @@ pub fn run(args: &ExploreArgs) -> anyhow::Result<()> {
                 .collect();
             eprintln!(
                 "[{:6.1} s] coverage {:5.1} %  {}  {} keyframes, {} loops  ({:.1}× real time)",
-                now - t0,
+                elapsed,
                 cov * 100.0,
                 states.join(", "),
                 s.slam.stats.keyframes,
@@ -325,7 +417,7 @@ pub fn run(args: &ExploreArgs) -> anyhow::Result<()> {
                 (now - t0) / wall.elapsed().as_secs_f64().max(1e-3)
             );
         }
-        if now - t0 > args.timeout + 120.0 {
+        if elapsed > args.timeout + 120.0 {
             eprintln!("explore: drones still flying 120 s after the timeout; giving up");
             break;
         }
@@ -359,8 +451,8 @@ pub fn run(args: &ExploreArgs) -> anyhow::Result<()> {
         exploration_time_s: report.mission_time_s,
         coverage: grid
             .as_ref()
-            .map_or(0.0, |g| coverage(&reachable, &world, g)),
-        wall_error: grid.as_ref().and_then(|g| wall_error(&world, g)),
+            .map_or(0.0, |g| coverage(&reachable, world, g)),
+        wall_error: grid.as_ref().and_then(|g| wall_error(world, g)),
         collisions: collisions.iter().sum(),
         all_landed: all_down(&sitl),
         world: world.name().into(),

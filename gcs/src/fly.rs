@@ -32,11 +32,14 @@ use slam::system::{RobotSetup, Slam, SlamConfig};
 
 use gcs::clock::{Clock, WallClock};
 use gcs::fleet::{LinkKind, altitude_band, connect, sim_body_from_camera};
+use gcs::gui::{self, Station};
 use gcs::outputs;
 use gcs::record::{Record, Recorder, Setup, SetupDrone};
 use gcs::runtime::drone::{DroneSpec, StartSequence};
 use gcs::runtime::perception::CameraFrame;
 use gcs::runtime::{Operator, Outcome, Runtime, RuntimeConfig};
+
+use crate::explore::Window;
 
 /// Arguments of `gcs fly`.
 #[derive(Args, Debug, Clone)]
@@ -181,6 +184,13 @@ fn load_fleet(path: &Path) -> anyhow::Result<Vec<Vehicle>> {
 
 /// Runs `gcs fly`.
 pub fn run(args: &FlyArgs) -> anyhow::Result<()> {
+    run_with(args, None)
+}
+
+/// Flies the fleet, in a window if one is given (`gcs gui --config`).
+pub fn run_with(args: &FlyArgs, window: Option<Window>) -> anyhow::Result<()> {
+    let waits = window.as_ref().is_some_and(|w| w.wait_for_start);
+    let session = window.as_ref().is_some_and(|w| w.close_ends_session);
     if !(args.timeout.is_finite() && args.timeout > 0.0) {
         bail!(
             "--timeout {} must be a positive number of seconds",
@@ -252,6 +262,8 @@ pub fn run(args: &FlyArgs) -> anyhow::Result<()> {
     let runtime = Runtime::start(
         RuntimeConfig {
             timeout: Some(args.timeout),
+            auto_start: !waits,
+            exit_when_done: !session,
             ..RuntimeConfig::default()
         },
         drones,
@@ -269,9 +281,45 @@ pub fn run(args: &FlyArgs) -> anyhow::Result<()> {
         tracing::warn!("Ctrl-C will not land the drones: {e}");
     }
     eprintln!(
-        "fly: {} vehicle(s) connected; exploring (Ctrl-C lands all)",
-        fleet.len()
+        "fly: {} vehicle(s) connected; {} (Ctrl-C lands all)",
+        fleet.len(),
+        if waits {
+            "waiting for the operator's start"
+        } else {
+            "exploring"
+        }
     );
+    let Some(window) = window else {
+        return watch(args, &fleet, runtime);
+    };
+    let station = Station::of(
+        &runtime,
+        None,
+        format!("{} vehicle(s) from {}", fleet.len(), args.config.display()),
+    );
+    let commander = runtime.commander();
+    let worker = {
+        let args = args.clone();
+        std::thread::Builder::new()
+            .name("fly".into())
+            .spawn(move || watch(&args, &fleet, runtime))?
+    };
+    let shown = gui::run_window(station, window.options);
+    // Closing the window ends the session: everything lands first.
+    let _ = commander.send(Operator::Shutdown);
+    let result = worker
+        .join()
+        .map_err(|_| anyhow::anyhow!("the mission thread panicked"))?;
+    shown.map_err(|e| {
+        anyhow::anyhow!(
+            "cannot show the window: {e} (is there a display? Without one, run under `xvfb-run`)"
+        )
+    })?;
+    result
+}
+
+/// Follows the mission to its end, then writes the outputs and prints the summary.
+fn watch(args: &FlyArgs, fleet: &[Vehicle], runtime: Runtime) -> anyhow::Result<()> {
     let started = Instant::now();
     let mut next = Duration::ZERO;
     while !runtime.finished() {

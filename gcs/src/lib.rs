@@ -5,6 +5,7 @@
 pub mod clock;
 pub mod evaluate;
 pub mod fleet;
+pub mod gui;
 pub mod outputs;
 pub mod record;
 pub mod runtime;

@@ -2,6 +2,7 @@
 
 mod explore;
 mod fly;
+mod gui_cmd;
 mod plan;
 mod probe;
 mod replay;
@@ -16,7 +17,7 @@ use clap::{Parser, Subcommand};
 #[command(
     name = "gcs",
     version,
-    about = "Ground control station for cooperative multi-drone exploration (so far: vehicle links, planning, SLAM back-end tools)"
+    about = "Ground control station for cooperative multi-drone exploration"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -29,6 +30,9 @@ enum Top {
     Explore(explore::ExploreArgs),
     /// Explore with real or external vehicles listed in a fleet file (FLEET.toml).
     Fly(fly::FlyArgs),
+    /// The operator's window: fleet, live map, plots and controls (the simulated fleet unless
+    /// `--config FLEET.toml`).
+    Gui(gui_cmd::GuiArgs),
     /// Rerun the SLAM on a recorded mission (MCAP) and report how the result differs.
     Replay(replay::ReplayArgs),
     /// One mission-planner step on a map: frontiers, assignment, paths.
@@ -63,6 +67,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Top::Explore(args) => explore::run(&args),
         Top::Fly(args) => fly::run(&args),
+        Top::Gui(args) => gui_cmd::run(&args),
         Top::Replay(args) => replay::run(&args),
         Top::Plan(args) => plan::run(&args),
         Top::Slam { command } => slam_cmd::run(&command),
