@@ -20,16 +20,16 @@ use slam::trajectory::Stamped;
 
 use gcs::evaluate::{WallError, coverage, reachable_free, wall_error};
 use gcs::fleet::{LinkKind, SimFleet, SimFleetConfig, sim_body_from_camera};
-use gcs::gui::{self, Station};
+use gcs::gui::Station;
 use gcs::outputs;
 use gcs::record::{Record, Recorder, Setup, SetupDrone};
-use gcs::runtime::{MissionState, Operator, Outcome, Runtime, RuntimeConfig};
+use gcs::runtime::{MissionState, Outcome, Runtime, RuntimeConfig};
 
-use crate::gui_cmd::WindowArgs;
+use crate::gui_cmd::{Window, WindowArgs, beside_window};
 
-/// Arguments of `gcs explore`.
+/// The simulated fleet, as `gcs explore` and `gcs gui` take it.
 #[derive(Args, Debug, Clone)]
-pub struct ExploreArgs {
+pub struct SimArgs {
     /// A built-in world (apartment) or a world file (.txt, map_server .yaml, HouseExpo .json).
     #[arg(long, default_value = sitl::world::DEFAULT_WORLD)]
     pub world: String,
@@ -48,6 +48,18 @@ pub struct ExploreArgs {
     /// Seed of the simulator's noise.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Where the drones' poses come from: the multi-robot SLAM on their cameras (`slam`), or the
+    /// simulator's ground truth (`truth`, to measure navigation alone).
+    #[arg(long, value_enum, default_value_t = PoseSource::Slam)]
+    pub poses: PoseSource,
+}
+
+/// Arguments of `gcs explore`.
+#[derive(Args, Debug, Clone)]
+pub struct ExploreArgs {
+    /// The simulated fleet.
+    #[command(flatten)]
+    pub sim: SimArgs,
     /// Give up (and land) after this many simulated seconds.
     #[arg(long, default_value_t = 900.0)]
     pub timeout: f64,
@@ -57,10 +69,6 @@ pub struct ExploreArgs {
     /// Print the summary as JSON on stdout (progress still goes to stderr).
     #[arg(long)]
     pub json: bool,
-    /// Where the drones' poses come from: the multi-robot SLAM on their cameras (`slam`), or the
-    /// simulator's ground truth (`truth`, to measure navigation alone).
-    #[arg(long, value_enum, default_value_t = PoseSource::Slam)]
-    pub poses: PoseSource,
     /// Do not record the MCAP log and `.tlog`s.
     #[arg(long)]
     pub no_log: bool,
@@ -179,13 +187,13 @@ pub struct DroneSummary {
 
 fn validate(args: &ExploreArgs) -> anyhow::Result<Option<(usize, f64)>> {
     args.window.validate()?;
-    if !(1..=8).contains(&args.drones) {
-        bail!("--drones {} must be 1 to 8", args.drones);
+    if !(1..=8).contains(&args.sim.drones) {
+        bail!("--drones {} must be 1 to 8", args.sim.drones);
     }
-    if !(args.speed.is_finite() && (0.1..=20.0).contains(&args.speed)) {
+    if !(args.sim.speed.is_finite() && (0.1..=20.0).contains(&args.sim.speed)) {
         bail!(
             "--speed {} must be between 0.1 and 20 (simulated seconds per second)",
-            args.speed
+            args.sim.speed
         );
     }
     if !(args.timeout.is_finite() && args.timeout > 0.0) {
@@ -200,12 +208,12 @@ fn validate(args: &ExploreArgs) -> anyhow::Result<Option<(usize, f64)>> {
             let parsed = s.split_once('@').and_then(|(k, t)| {
                 let k: usize = k.trim().parse().ok()?;
                 let t: f64 = t.trim().parse().ok()?;
-                (k >= 1 && k <= args.drones && t.is_finite() && t >= 0.0).then_some((k - 1, t))
+                (k >= 1 && k <= args.sim.drones && t.is_finite() && t >= 0.0).then_some((k - 1, t))
             });
             Some(parsed.ok_or_else(|| {
                 anyhow::anyhow!(
                     "--kill-link {s:?}: expected K@T with K a drone 1 to {} and T simulated seconds, e.g. 2@60",
-                    args.drones
+                    args.sim.drones
                 )
             })?)
         }
@@ -228,25 +236,25 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
     let kill = validate(args)?;
     let waits = window.as_ref().is_some_and(|w| w.wait_for_start);
     let session = window.as_ref().is_some_and(|w| w.close_ends_session);
-    let world = Arc::new(World::load(&args.world)?);
+    let world = Arc::new(World::load(&args.sim.world)?);
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create the output folder {}", args.out.display()))?;
     let fleet = SimFleet::start(&SimFleetConfig {
         world: world.clone(),
-        drones: args.drones,
-        link: args.link,
-        speed: args.speed,
-        seed: args.seed,
+        drones: args.sim.drones,
+        link: args.sim.link,
+        speed: args.sim.speed,
+        seed: args.sim.seed,
         tlog_dir: (!args.no_log).then(|| args.out.clone()),
     })?;
     eprintln!(
         "explore: world '{}', {} drone(s) over {}, {} assignment, poses from {}, {}× real time",
         world.name(),
-        args.drones,
-        args.link.name(),
-        args.strategy.name(),
-        args.poses.name(),
-        args.speed
+        args.sim.drones,
+        args.sim.link.name(),
+        args.sim.strategy.name(),
+        args.sim.poses.name(),
+        args.sim.speed
     );
     let recorder = if args.no_log {
         None
@@ -256,7 +264,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
         r.send(Record::Setup(Setup {
             version: 1,
             world: Some(world.name().into()),
-            strategy: args.strategy.name().into(),
+            strategy: args.sim.strategy.name().into(),
             drones: fleet
                 .drones
                 .iter()
@@ -267,7 +275,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
     };
     let slam = Slam::new(
         SlamConfig {
-            known_poses: args.poses == PoseSource::Truth,
+            known_poses: args.sim.poses == PoseSource::Truth,
             ..SlamConfig::default()
         },
         fleet.setups.clone(),
@@ -281,7 +289,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
     } = fleet;
     let runtime = Runtime::start(
         RuntimeConfig {
-            strategy: args.strategy.strategy(),
+            strategy: args.sim.strategy.strategy(),
             timeout: Some(args.timeout),
             // In the window the operator starts the mission (again, after a landing), and the
             // runtime lasts until the window closes.
@@ -303,47 +311,18 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
         Some(world.clone()),
         format!(
             "{} drone(s) in SITL '{}' over {}, poses from {}, {}× real time",
-            args.drones,
+            args.sim.drones,
             world.name(),
-            args.link.name(),
-            args.poses.name(),
-            args.speed
+            args.sim.link.name(),
+            args.sim.poses.name(),
+            args.sim.speed
         ),
     );
     let commander = runtime.commander();
-    let worker = {
-        let (args, world) = (args.clone(), world.clone());
-        std::thread::Builder::new()
-            .name("explore".into())
-            .spawn(move || watch(&args, &world, sitl, runtime, clock, kill))?
-    };
-    let shown = gui::run_window(station, window.options);
-    if window.close_ends_session || shown.is_err() {
-        // `gcs gui`: closing the window ends the session; everything lands first.
-        let _ = commander.send(Operator::Shutdown);
-    } else {
-        eprintln!("explore: window closed; the run goes on headless");
-    }
-    let result = worker
-        .join()
-        .map_err(|_| anyhow::anyhow!("the exploration thread panicked"))?;
-    shown.map_err(|e| {
-        anyhow::anyhow!(
-            "cannot show the window: {e} (is there a display? Without one, run under `xvfb-run`)"
-        )
-    })?;
-    result
-}
-
-/// The window of an exploration.
-pub struct Window {
-    /// Wait for the operator's start (`gcs gui`), or start at once (`gcs explore --gui`).
-    pub wait_for_start: bool,
-    /// Closing the window lands every drone and ends the session (`gcs gui`); otherwise the run
-    /// goes on headless (`gcs explore --gui`).
-    pub close_ends_session: bool,
-    /// Scripted use of the window.
-    pub options: gui::WindowOptions,
+    let (args, world) = (args.clone(), world.clone());
+    beside_window(station, window, commander, move || {
+        watch(&args, &world, sitl, runtime, clock, kill)
+    })
 }
 
 /// Watches a running exploration to its end (progress, ground truth, the fault if one was
@@ -359,9 +338,9 @@ fn watch(
     let reachable = reachable_free(world);
     let wall = Instant::now();
     let t0 = clock.now();
-    let mut truth_tracks: Vec<Vec<(f64, [f64; 4])>> = vec![vec![]; args.drones];
+    let mut truth_tracks: Vec<Vec<(f64, [f64; 4])>> = vec![vec![]; args.sim.drones];
     // Squared horizontal error of the flown pose, and samples, per drone.
-    let mut flight_error = vec![(0.0f64, 0usize); args.drones];
+    let mut flight_error = vec![(0.0f64, 0usize); args.sim.drones];
     let mut next_progress = t0;
     let mut next_truth = t0;
     let mut killed = false;
@@ -456,19 +435,19 @@ fn watch(
         collisions: collisions.iter().sum(),
         all_landed: all_down(&sitl),
         world: world.name().into(),
-        link: args.link.name(),
-        strategy: args.strategy.name(),
-        pose_source: match args.poses {
+        link: args.sim.link.name(),
+        strategy: args.sim.strategy.name(),
+        pose_source: match args.sim.poses {
             PoseSource::Slam => "slam",
             PoseSource::Truth => "ground truth",
         },
         loop_closures: stats.loop_closures,
         keyframes: stats.keyframes,
-        drones: (0..args.drones)
+        drones: (0..args.sim.drones)
             .map(|k| {
                 let estimated = perception.slam.trajectory(k);
                 let score = |est: &[Stamped]| {
-                    (args.poses == PoseSource::Slam)
+                    (args.sim.poses == PoseSource::Slam)
                         .then(|| ate(&perception.truth[k], est, Alignment::Se3, 1e-3))
                         .flatten()
                         .map(|a| a.rmse_m)
@@ -487,7 +466,7 @@ fn watch(
             })
             .collect(),
     };
-    let trajectories: Vec<(String, Vec<Stamped>, Vec<Stamped>)> = (0..args.drones)
+    let trajectories: Vec<(String, Vec<Stamped>, Vec<Stamped>)> = (0..args.sim.drones)
         .map(|k| {
             (
                 format!("drone{}", k + 1),

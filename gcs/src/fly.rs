@@ -32,14 +32,14 @@ use slam::system::{RobotSetup, Slam, SlamConfig};
 
 use gcs::clock::{Clock, WallClock};
 use gcs::fleet::{LinkKind, altitude_band, connect, sim_body_from_camera};
-use gcs::gui::{self, Station};
+use gcs::gui::Station;
 use gcs::outputs;
 use gcs::record::{Record, Recorder, Setup, SetupDrone};
 use gcs::runtime::drone::{DroneSpec, StartSequence};
 use gcs::runtime::perception::CameraFrame;
 use gcs::runtime::{Operator, Outcome, Runtime, RuntimeConfig};
 
-use crate::explore::Window;
+use crate::gui_cmd::{Window, beside_window};
 
 /// Arguments of `gcs fly`.
 #[derive(Args, Debug, Clone)]
@@ -298,24 +298,10 @@ pub fn run_with(args: &FlyArgs, window: Option<Window>) -> anyhow::Result<()> {
         format!("{} vehicle(s) from {}", fleet.len(), args.config.display()),
     );
     let commander = runtime.commander();
-    let worker = {
-        let args = args.clone();
-        std::thread::Builder::new()
-            .name("fly".into())
-            .spawn(move || watch(&args, &fleet, runtime))?
-    };
-    let shown = gui::run_window(station, window.options);
-    // Closing the window ends the session: everything lands first.
-    let _ = commander.send(Operator::Shutdown);
-    let result = worker
-        .join()
-        .map_err(|_| anyhow::anyhow!("the mission thread panicked"))?;
-    shown.map_err(|e| {
-        anyhow::anyhow!(
-            "cannot show the window: {e} (is there a display? Without one, run under `xvfb-run`)"
-        )
-    })?;
-    result
+    let args = args.clone();
+    beside_window(station, window, commander, move || {
+        watch(&args, &fleet, runtime)
+    })
 }
 
 /// Follows the mission to its end, then writes the outputs and prints the summary.

@@ -3,13 +3,14 @@
 //! flies real or external vehicles instead.
 
 use std::path::PathBuf;
+use std::sync::mpsc::Sender;
 
-use anyhow::bail;
+use anyhow::{anyhow, bail};
 use clap::Args;
-use gcs::fleet::LinkKind;
-use gcs::gui::WindowOptions;
+use gcs::gui::{self, Station, WindowOptions};
+use gcs::runtime::Operator;
 
-use crate::explore::{self, ExploreArgs, PoseSource, StrategyArg, Window};
+use crate::explore::{self, ExploreArgs, SimArgs};
 use crate::fly::{self, FlyArgs};
 
 /// Arguments of `gcs gui`.
@@ -19,27 +20,9 @@ pub struct GuiArgs {
     /// fleet.
     #[arg(long, conflicts_with_all = ["world", "drones", "link", "speed", "seed", "poses", "strategy"])]
     pub config: Option<PathBuf>,
-    /// A built-in world (apartment) or a world file (.txt, map_server .yaml, HouseExpo .json).
-    #[arg(long, default_value = sitl::world::DEFAULT_WORLD)]
-    pub world: String,
-    /// Number of simulated drones (1–8).
-    #[arg(long, default_value_t = 2)]
-    pub drones: usize,
-    /// How the station talks to the simulated drones.
-    #[arg(long, value_enum, default_value_t = LinkKind::Mavlink)]
-    pub link: LinkKind,
-    /// How frontiers are assigned.
-    #[arg(long, value_enum, default_value_t = StrategyArg::Hungarian)]
-    pub strategy: StrategyArg,
-    /// Simulated seconds per real second (0.1–20).
-    #[arg(long, default_value_t = 2.0)]
-    pub speed: f64,
-    /// Seed of the simulator's noise.
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
-    /// Where the drones' poses come from.
-    #[arg(long, value_enum, default_value_t = PoseSource::Slam)]
-    pub poses: PoseSource,
+    /// The simulated fleet.
+    #[command(flatten)]
+    pub sim: SimArgs,
     /// Give up (and land) this many seconds after the start.
     #[arg(long, default_value_t = 900.0)]
     pub timeout: f64,
@@ -131,16 +114,10 @@ pub fn run(args: &GuiArgs) -> anyhow::Result<()> {
         ),
         None => explore::run_with(
             &ExploreArgs {
-                world: args.world.clone(),
-                drones: args.drones,
-                link: args.link,
-                strategy: args.strategy,
-                speed: args.speed,
-                seed: args.seed,
+                sim: args.sim.clone(),
                 timeout: args.timeout,
                 out: args.out.clone(),
                 json: false,
-                poses: args.poses,
                 no_log: args.no_log,
                 kill_link: None,
                 gui: true,
@@ -149,4 +126,44 @@ pub fn run(args: &GuiArgs) -> anyhow::Result<()> {
             Some(window),
         ),
     }
+}
+
+/// How a mission is shown in the window.
+pub struct Window {
+    /// Wait for the operator's start (`gcs gui`), or start at once (`gcs explore --gui`).
+    pub wait_for_start: bool,
+    /// Closing the window lands every drone and ends the session (`gcs gui`); otherwise the run
+    /// goes on headless (`gcs explore --gui`).
+    pub close_ends_session: bool,
+    /// Scripted use of the window.
+    pub options: WindowOptions,
+}
+
+/// Shows `station` in the window on this thread (windows live on the main thread) while
+/// `mission` follows the mission to its end on another; returns when both are done.
+pub fn beside_window(
+    station: Station,
+    window: Window,
+    commander: Sender<Operator>,
+    mission: impl FnOnce() -> anyhow::Result<()> + Send + 'static,
+) -> anyhow::Result<()> {
+    let worker = std::thread::Builder::new()
+        .name("mission watch".into())
+        .spawn(mission)?;
+    let shown = gui::run_window(station, window.options);
+    if window.close_ends_session || shown.is_err() {
+        // Everything lands before the session ends.
+        let _ = commander.send(Operator::Shutdown);
+    } else {
+        eprintln!("window closed; the run goes on headless");
+    }
+    let result = worker
+        .join()
+        .map_err(|_| anyhow!("the mission thread panicked"))?;
+    shown.map_err(|e| {
+        anyhow!(
+            "cannot show the window: {e} (is there a display? Without one, run under `xvfb-run`)"
+        )
+    })?;
+    result
 }

@@ -191,3 +191,45 @@ fn real_window_under_xvfb_shows_the_map() {
     assert!(out.join("summary.json").exists(), "{stderr}");
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// Runs `gcs` with `args` and no display.
+fn gcs_headless(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_gcs"))
+        .args(args)
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .output()
+        .expect("run gcs")
+}
+
+#[test]
+fn bad_window_arguments_and_no_display_are_explained() {
+    let out = gcs_headless(&["gui", "--screenshot", "shot.jpg"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("name it FILE.png"), "{err}");
+
+    let out = gcs_headless(&["gui", "--quit-after=-3"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--quit-after -3"), "{err}");
+
+    let out = gcs_headless(&["gui", "--config", "fleet.toml", "--drones", "3"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("cannot be used with"), "{err}");
+
+    // No display: the simulated fleet starts, nothing takes off, and the error says what to do.
+    let dir = std::env::temp_dir().join(format!("gcs-gui-nodisplay-{}", std::process::id()));
+    let out = gcs_headless(&[
+        "gui",
+        "--no-log",
+        "--out",
+        dir.to_str().expect("utf-8 path"),
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("cannot show the window"), "{err}");
+    assert!(err.contains("xvfb-run"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
