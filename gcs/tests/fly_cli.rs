@@ -4,51 +4,13 @@
 
 mod common;
 
-use std::sync::Arc;
-
-use common::gcs;
-use sitl::{Camera, EndpointSpec, Protocol, SimConfig, Sitl, SitlConfig, World};
+use common::{gcs, serve_fleet};
+use sitl::Protocol;
 
 #[test]
 fn fly_explores_with_an_external_fleet_over_mavlink_and_the_shield_and_lands() {
-    let spec = |protocol| EndpointSpec {
-        protocol,
-        address: "tcpin:127.0.0.1:0".parse().expect("address"),
-    };
-    let sitl = Sitl::start(SitlConfig {
-        world: Arc::new(World::load("apartment").expect("built-in world")),
-        sim: SimConfig {
-            camera: Some(Camera::kinect(320, 240)),
-            camera_hz: 10.0,
-            ..SimConfig::default()
-        },
-        vehicles: vec![spec(Protocol::Mavlink), spec(Protocol::Shield)],
-        camera: Some("tcpin:127.0.0.1:0".parse().expect("address")),
-        speed: 1.0,
-    })
-    .expect("the simulator starts");
-    let ports: Vec<u16> = sitl
-        .endpoint_addrs()
-        .iter()
-        .map(|a| a.expect("a local address").port())
-        .collect();
-    let camera = sitl.camera_addr().expect("a camera stream").port();
-    let starts: Vec<[f64; 3]> = sitl.starts();
     let dir = std::env::temp_dir().join(format!("gcs-fly-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    let fleet = dir.join("fleet.toml");
-    let vehicle = |protocol: &str, port: u16, start: [f64; 3], extra: &str| {
-        format!(
-            "[[vehicle]]\nprotocol = \"{protocol}\"\naddress = \"tcpout:127.0.0.1:{port}\"\ncamera = \"tcpout:127.0.0.1:{camera}\"\nstart = [{}, {}, {}]\n{extra}\n",
-            start[0], start[1], start[2]
-        )
-    };
-    std::fs::write(
-        &fleet,
-        vehicle("mavlink", ports[0], starts[0], "name = \"alpha\"")
-            + &vehicle("shield", ports[1], starts[1], "channels = \"thesis\""),
-    )
-    .expect("fleet file");
+    let (sitl, fleet) = serve_fleet(&dir, &[Protocol::Mavlink, Protocol::Shield]);
     let out = dir.join("out");
     let run = gcs(&[
         "fly",

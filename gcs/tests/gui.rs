@@ -2,6 +2,7 @@
 //! loopback sockets, the mission runtime, and the window driven headless by `egui_kittest`
 //! (buttons → runtime → vehicles, and what the vehicles do back on the panels); then the real
 //! window under Xvfb with Mesa's software OpenGL, screenshotted and checked.
+mod common;
 
 use std::path::Path;
 use std::process::Command;
@@ -231,5 +232,63 @@ fn bad_window_arguments_and_no_display_are_explained() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("cannot show the window"), "{err}");
     assert!(err.contains("xvfb-run"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `gcs gui --config`: the window on external vehicles (a simulator serving a MAVLink vehicle
+/// and its camera over TCP, as hardware would be), started from the command line, shown under
+/// Xvfb, and everything landed when it closes.
+#[test]
+fn window_on_a_fleet_file_flies_and_lands_the_external_vehicle() {
+    let dir = std::env::temp_dir().join(format!("gcs-gui-fleet-{}", std::process::id()));
+    let (sitl, fleet) = common::serve_fleet(&dir, &[sitl::Protocol::Mavlink]);
+    let shot = dir.join("fleet.png");
+    let run = Command::new("xvfb-run")
+        .args(["-a", "-s", "-screen 0 1400x900x24"])
+        .arg(env!("CARGO_BIN_EXE_gcs"))
+        .args([
+            "gui",
+            "--start",
+            "--screenshot-at",
+            "12",
+            "--quit-after",
+            "12",
+            "--no-log",
+        ])
+        .arg("--config")
+        .arg(&fleet)
+        .arg("--screenshot")
+        .arg(&shot)
+        .arg("--out")
+        .arg(dir.join("out"))
+        .output()
+        .expect("run xvfb-run");
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "gcs gui --config failed:\n{stderr}");
+    // It flew (the mission ran 12 s) and the window's closing landed it.
+    let picture = image::open(&shot).expect("the screenshot").to_rgb8();
+    let c = gcs::gui::drone_colour(0);
+    let drone = picture
+        .pixels()
+        .filter(|p| p.0 == [c.r(), c.g(), c.b()])
+        .count();
+    assert!(drone > 30, "the drone is {drone} pixels");
+    sitl.with_sim(|sim| {
+        let s = sim.vehicle(0).state();
+        assert!(s.landed && !s.armed, "{s:?}");
+    });
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("out/summary.json")).expect("summary.json"))
+            .expect("JSON");
+    assert_eq!(summary["outcome"], "land all", "{summary}");
+    assert_eq!(summary["drones"][0]["name"], "alpha", "{summary}");
+    assert_eq!(summary["drones"][0]["final_phase"], "landed", "{summary}");
+    assert!(
+        summary["drones"][0]["path_length_m"]
+            .as_f64()
+            .unwrap_or(0.0)
+            > 0.5,
+        "{summary}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
