@@ -128,22 +128,28 @@ fn window_buttons_fly_the_simulated_fleet_and_show_a_lost_link() {
     drop(runtime);
 }
 
-/// The window itself, under Xvfb with software OpenGL, exploring; its screenshot must show the
-/// map. Writes `target/gui-screenshot.png` (the README's picture is made the same way).
-#[test]
-fn real_window_under_xvfb_shows_the_map() {
+/// `gcs` in a virtual X server (Xvfb, Mesa's software OpenGL) of 1400×900 pixels.
+fn under_xvfb() -> Command {
     if Command::new("xvfb-run").arg("--help").output().is_err() {
         panic!(
             "xvfb-run is missing: install it (Debian: apt-get install xvfb) to test the real window"
         );
     }
+    let mut c = Command::new("xvfb-run");
+    c.args(["-a", "-s", "-screen 0 1400x900x24"])
+        .arg(env!("CARGO_BIN_EXE_gcs"));
+    c
+}
+
+/// The window itself, under Xvfb with software OpenGL, exploring; its screenshot must show the
+/// map. Writes `target/gui-screenshot.png` (the README's picture is made the same way).
+#[test]
+fn real_window_under_xvfb_shows_the_map() {
     let target = Path::new(env!("CARGO_MANIFEST_DIR")).join("../target");
     let shot = target.join("gui-screenshot.png");
     let out = std::env::temp_dir().join(format!("gcs-gui-{}", std::process::id()));
     let _ = std::fs::remove_file(&shot);
-    let run = Command::new("xvfb-run")
-        .args(["-a", "-s", "-screen 0 1400x900x24"])
-        .arg(env!("CARGO_BIN_EXE_gcs"))
+    let run = under_xvfb()
         .args([
             "gui",
             "--start",
@@ -243,9 +249,7 @@ fn window_on_a_fleet_file_flies_and_lands_the_external_vehicle() {
     let dir = std::env::temp_dir().join(format!("gcs-gui-fleet-{}", std::process::id()));
     let (sitl, fleet) = common::serve_fleet(&dir, &[sitl::Protocol::Mavlink]);
     let shot = dir.join("fleet.png");
-    let run = Command::new("xvfb-run")
-        .args(["-a", "-s", "-screen 0 1400x900x24"])
-        .arg(env!("CARGO_BIN_EXE_gcs"))
+    let run = under_xvfb()
         .args([
             "gui",
             "--start",
