@@ -23,7 +23,7 @@ use gcs::fleet::{LinkKind, SimFleet, SimFleetConfig, sim_body_from_camera};
 use gcs::gui::Station;
 use gcs::outputs;
 use gcs::record::{Record, Recorder, Setup, SetupDrone};
-use gcs::runtime::{MissionState, Outcome, Runtime, RuntimeConfig};
+use gcs::runtime::{MissionState, Operator, Outcome, Runtime, RuntimeConfig};
 
 use crate::gui_cmd::{Window, WindowArgs, beside_window};
 
@@ -398,6 +398,7 @@ fn watch(
         }
         if elapsed > args.timeout + 120.0 {
             eprintln!("explore: drones still flying 120 s after the timeout; giving up");
+            runtime.send(Operator::Shutdown);
             break;
         }
         std::thread::sleep(Duration::from_millis(5));

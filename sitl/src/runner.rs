@@ -264,15 +264,16 @@ impl Sitl {
         self.add_subscriber(false)
     }
 
-    /// Every camera frame from now on, none dropped: when the receiver falls 8 behind, simulated
+    /// Every camera frame from now on, none dropped: when the receiver falls 2 behind, simulated
     /// time waits for it (an in-process station whose SLAM must see every frame, whatever the
-    /// machine's load). Drop the receiver to release the simulation.
+    /// machine's load — and see it soon: a deeper queue is latency, in simulated time, between
+    /// a frame and the pose the vehicle flies on). Drop the receiver to release the simulation.
     pub fn subscribe_all(&self) -> Receiver<Arc<CameraFrame>> {
         self.add_subscriber(true)
     }
 
     fn add_subscriber(&self, lossless: bool) -> Receiver<Arc<CameraFrame>> {
-        let (tx, rx) = sync_channel(8);
+        let (tx, rx) = sync_channel(if lossless { 2 } else { 8 });
         self.shared
             .subscribers
             .lock()

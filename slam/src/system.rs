@@ -67,6 +67,11 @@ pub struct SlamConfig {
     pub loop_skip_recent: usize,
     /// A loop closure needs this many inliers.
     pub loop_min_inliers: usize,
+    /// On a vehicle (frames with a predicted body pose), a tracked frame with fewer inliers is
+    /// not built on (no keyframe, not the next frame's reference)…
+    pub keyframe_min_inliers: usize,
+    /// …unless it agrees with the motion so far within this: metres, radians.
+    pub weak_agreement: (f64, f64),
     /// A loop closure may correct the current estimate by at most this much, metres…
     pub loop_max_correction: f64,
     /// …and radians.
@@ -128,6 +133,8 @@ impl Default for SlamConfig {
             loop_candidates: 3,
             loop_skip_recent: 8,
             loop_min_inliers: 25,
+            keyframe_min_inliers: 25,
+            weak_agreement: (0.03, 1f64.to_radians()),
             loop_max_correction: 1.0,
             loop_max_correction_angle: 20f64.to_radians(),
             place_candidates: 2,
@@ -963,16 +970,34 @@ impl Slam {
             }
         };
         let pose = self.nodes[anchor].pose * anchor_from_camera;
+        // On a vehicle (a caller that predicts the body, i.e. has a filter to fly on between
+        // fixes), a weak registration that disagrees with the motion so far gives this frame its
+        // pose but nothing to build on: it becomes neither the next frame's reference nor a
+        // keyframe, nor the motion the next frame is predicted with (a fit on a dozen inliers
+        // can be degrees off, and a keyframe would keep that error in the map for good). One
+        // that agrees carries tracking through a bare stretch. A hand-held camera moves in jerks
+        // that no constant-velocity model follows; there every registration is built on.
+        let (max_t, max_r) = self.config.weak_agreement;
+        let weak = frame.predicted_body.is_some()
+            && reg.inliers < self.config.keyframe_min_inliers
+            && predicted.is_none_or(|p| {
+                let d = p.inverse() * pose;
+                d.translation.vector.norm() > max_t || d.rotation.angle() > max_r
+            });
         let was_lost = r.state != RobotState::Tracking;
-        r.velocity = (!was_lost).then(|| last_pose.inverse() * pose);
+        if !weak {
+            r.velocity = (!was_lost).then(|| last_pose.inverse() * pose);
+        }
         r.state = RobotState::Tracking;
         r.reference = Some(anchor);
         r.reference_from_camera = anchor_from_camera;
-        r.previous = Some(Previous {
-            observation: observation.clone(),
-            reference: anchor,
-            reference_from_camera: anchor_from_camera,
-        });
+        if !weak {
+            r.previous = Some(Previous {
+                observation: observation.clone(),
+                reference: anchor,
+                reference_from_camera: anchor_from_camera,
+            });
+        }
         let moved = anchor_from_camera.translation.vector.norm() > self.config.keyframe_translation
             || anchor_from_camera.rotation.angle() > self.config.keyframe_rotation;
         let slipping = matched.is_none() || matched != Some(reference);
@@ -982,7 +1007,7 @@ impl Slam {
                 inliers: reg.inliers,
             },
         };
-        if !(moved || slipping) {
+        if weak || !(moved || slipping) {
             return FrameReport {
                 tracking: tracking_report,
                 keyframe: None,

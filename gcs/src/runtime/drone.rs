@@ -102,6 +102,8 @@ pub struct DroneConfig {
     pub low_battery_pct: u8,
     /// A goal reached within this distance, metres (returning home).
     pub home_reach_m: f64,
+    /// Send LAND again if the vehicle is still armed this long after it, seconds.
+    pub land_retry_s: f64,
 }
 
 impl Default for DroneConfig {
@@ -141,6 +143,7 @@ impl Default for DroneConfig {
             blind_land_s: 30.0,
             low_battery_pct: 25,
             home_reach_m: 0.3,
+            land_retry_s: 20.0,
         }
     }
 }
@@ -187,6 +190,8 @@ pub struct Drone {
     /// The phase the link was lost in.
     lost_in: Option<Phase>,
     blind_since: Option<f64>,
+    /// When the last LAND was sent (mission time), while landing.
+    landing_since: Option<f64>,
     last_tick: Option<f64>,
     /// The sticks sent last.
     pub sticks: Option<Sticks>,
@@ -234,6 +239,7 @@ impl Drone {
             pending: None,
             lost_in: None,
             blind_since: None,
+            landing_since: None,
             last_tick: None,
             sticks: None,
             trajectory: vec![],
@@ -316,6 +322,7 @@ impl Drone {
         self.follower.set_path(vec![]);
         self.goal = None;
         self.phase = Phase::Landing;
+        self.landing_since = None;
         self.send(Command::Land);
     }
 
@@ -478,6 +485,16 @@ impl Drone {
                     self.link.set_sticks(None);
                     self.sticks = None;
                     self.say("landed".into());
+                } else if self.pending.is_none()
+                    && now - *self.landing_since.get_or_insert(now) > config.land_retry_s
+                {
+                    // Still armed long after the command: it may never have arrived. Again.
+                    self.say(format!(
+                        "still armed {:.0} s after LAND: sending it again",
+                        config.land_retry_s
+                    ));
+                    self.landing_since = Some(now);
+                    self.send(Command::Land);
                 }
                 return None;
             }

@@ -52,6 +52,9 @@ pub struct RuntimeConfig {
     pub min_mission_s: f64,
     /// End the runtime when every drone is down after the mission (headless).
     pub exit_when_done: bool,
+    /// After a shutdown, end this long after it even if a drone has not reported landing,
+    /// seconds (its own failsafe takes over once the station is gone).
+    pub shutdown_wait_s: f64,
 }
 
 impl Default for RuntimeConfig {
@@ -66,6 +69,7 @@ impl Default for RuntimeConfig {
             timeout: None,
             min_mission_s: 10.0,
             exit_when_done: true,
+            shutdown_wait_s: 60.0,
         }
     }
 }
@@ -385,7 +389,9 @@ impl Mission {
         self.trajectories = (0..self.drones.len()).map(|_| Arc::default()).collect();
         let mut next_control = self.clock.now();
         let mut next_plan = next_control + 2.0;
-        let mut shutdown = false;
+        // When the operator (or the process) asked to end: the runtime waits for the drones to
+        // come down, but not for ever (a vehicle that never reports landing must not hang it).
+        let mut shutdown: Option<f64> = None;
         if self.config.auto_start {
             self.operate(Operator::Start);
         }
@@ -393,7 +399,7 @@ impl Mission {
             let now = self.clock.now();
             for command in self.commands.try_iter().collect::<Vec<_>>() {
                 if command == Operator::Shutdown {
-                    shutdown = true;
+                    shutdown.get_or_insert(now);
                 }
                 self.operate(command);
             }
@@ -425,17 +431,27 @@ impl Mission {
             }
             self.check_end(now);
             if let MissionState::Done(_) = self.state
-                && (self.config.exit_when_done || shutdown)
+                && (self.config.exit_when_done || shutdown.is_some())
             {
                 break;
             }
-            if shutdown
-                && self
+            if let Some(asked) = shutdown {
+                let down = self
                     .drones
                     .iter()
-                    .all(|d| !d.phase.flying() && d.phase != Phase::Landing)
-            {
-                break;
+                    .all(|d| !d.phase.flying() && d.phase != Phase::Landing);
+                if down || now - asked > self.config.shutdown_wait_s {
+                    if !down {
+                        self.say(
+                            now,
+                            format!(
+                                "ending {:.0} s after shutdown with drones not down",
+                                self.config.shutdown_wait_s
+                            ),
+                        );
+                    }
+                    break;
+                }
             }
             std::thread::sleep(Duration::from_millis(2));
         }

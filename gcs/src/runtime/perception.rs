@@ -66,15 +66,42 @@ impl SensorLog {
     }
 
     /// Drone `k`'s sample nearest to time `t` (within 0.25 s).
+    ///
+    /// Telemetry reaches the station up to about a control period late (its own rate, the
+    /// transport, then the control loop's sampling), so while the drone turns, its heading
+    /// lags: 3° at the 36°/s of a look-around, more than the SLAM's heading prior (2°) can
+    /// take. The heading is left out of a sample taken while turning faster than
+    /// [`MAX_HEADING_RATE`].
     pub fn at(&self, k: usize, t: f64) -> Option<SensorSample> {
         let log = self.0.lock().unwrap_or_else(PoisonError::into_inner);
-        log.get(k)?
+        let q = log.get(k)?;
+        let (i, nearest) = q
             .iter()
-            .min_by(|a, b| (a.t - t).abs().total_cmp(&(b.t - t).abs()))
-            .copied()
-            .filter(|s| (s.t - t).abs() < 0.25)
+            .enumerate()
+            .min_by(|(_, a), (_, b)| (a.t - t).abs().total_cmp(&(b.t - t).abs()))?;
+        if (nearest.t - t).abs() >= 0.25 {
+            return None;
+        }
+        let mut sample = *nearest;
+        let before = q.get(i.wrapping_sub(1)).unwrap_or(nearest);
+        let after = q.get(i + 1).unwrap_or(nearest);
+        let turning = match (before.heading, after.heading) {
+            (Some(a), Some(b)) if after.t > before.t => {
+                let turn = (b - a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+                    - std::f64::consts::PI;
+                (turn / (after.t - before.t)).abs() > MAX_HEADING_RATE
+            }
+            _ => false,
+        };
+        if turning {
+            sample.heading = None;
+        }
+        Some(sample)
     }
 }
+
+/// The fastest turn at which a telemetry heading still goes to the SLAM, radians per second.
+pub const MAX_HEADING_RATE: f64 = 0.17;
 
 /// A SLAM pose of one drone's body at a frame's time (`None`: tracking lost).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -327,4 +354,52 @@ pub fn slam_frame(f: &CameraFrame, sample: Option<SensorSample>, known: bool) ->
         predicted_body: predicted,
         known_camera_pose: f.truth.filter(|_| known),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample(t: f64, heading: f64) -> SensorSample {
+        SensorSample {
+            t,
+            heading: Some(heading),
+            height: Some(0.9),
+            body: None,
+        }
+    }
+
+    #[test]
+    fn sensor_samples_are_found_by_time() {
+        let log = SensorLog::new(1);
+        for i in 0..10 {
+            log.push(0, sample(f64::from(i) * 0.1, 1.0));
+        }
+        assert_eq!(log.at(0, 0.42).map(|s| s.t), Some(0.4));
+        assert_eq!(log.at(0, 0.42).and_then(|s| s.heading), Some(1.0));
+        assert!(log.at(0, 1.5).is_none(), "nothing within 0.25 s");
+        assert!(log.at(1, 0.4).is_none(), "no such drone");
+    }
+
+    #[test]
+    fn a_heading_taken_while_turning_fast_is_left_out() {
+        let log = SensorLog::new(1);
+        // A look-around: 36°/s, through ±180°.
+        for i in 0..30 {
+            let t = f64::from(i) * 0.1;
+            let yaw = (3.0 + 0.628 * t + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+                - std::f64::consts::PI;
+            log.push(0, sample(t, yaw));
+        }
+        for t in [0.0, 0.55, 1.0, 2.9] {
+            let s = log.at(0, t).expect("a sample");
+            assert!(s.heading.is_none(), "t = {t}: {s:?}");
+            assert_eq!(s.height, Some(0.9), "the height stays");
+        }
+        // Then hovering, turning 2°/s: the heading goes to the SLAM again.
+        for i in 30..40 {
+            log.push(0, sample(f64::from(i) * 0.1, 1.0 + f64::from(i) * 0.0035));
+        }
+        assert!(log.at(0, 3.5).and_then(|s| s.heading).is_some());
+    }
 }
