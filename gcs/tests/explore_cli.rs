@@ -181,9 +181,11 @@ fn replay_reproduces_the_map(out: &Path) {
 fn two_drones_on_slam_poses_over_the_shield_protocol_map_and_land_safely() {
     // The product as it is: every pose from the drones' cameras (no ground truth in the loop),
     // the vehicles behind the thesis's I/O shield. Tracking is still lost too often in flight
-    // for the map to be complete or reliably consistent (issue 7 stays open on it: coverage
-    // 17–78 % and walls within 0.1 m 70–100 % over seeds); what must hold already: the drones
-    // come down safely whatever their tracking did, and the SLAM mapped and scored every drone.
+    // for the map to be complete every time (issue 7 stays open on it: coverage 57–97 % over
+    // seeds); what must hold already: the drones come down safely whatever their tracking did,
+    // the map's walls are where the world's are, and each drone flew on a pose within half a
+    // metre of the truth (RMS; 0.07–0.31 m seen — it was 0.6–1.2 m while the camera queues
+    // held 0.7 s of frames).
     let (summary, _, out) = explore(
         "slam",
         &[
@@ -203,9 +205,14 @@ fn two_drones_on_slam_poses_over_the_shield_protocol_map_and_land_safely() {
     assert_eq!(summary["all_landed"], true, "{summary}");
     assert!(number(&summary["keyframes"]) > 50.0, "{summary}");
     assert!(number(&summary["wall_error"]["cells"]) > 100.0, "{summary}");
+    assert!(
+        number(&summary["wall_error"]["within_0_1_m"]) >= 0.8,
+        "{summary}"
+    );
     for d in summary["drones"].as_array().expect("drones") {
         assert!(number(&d["ate_rmse_m"]).is_finite(), "{d}");
         assert!(number(&d["path_length_m"]) > 3.0, "{d}");
+        assert!(number(&d["flight_pose_error_m"]) <= 0.5, "{d}");
     }
     std::fs::remove_dir_all(&out).ok();
 }

@@ -694,3 +694,105 @@ impl Drone {
         self.controller.reset();
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Mutex;
+
+    use link::{LinkStatus, StatusText, Telemetry};
+
+    use super::*;
+
+    /// A vehicle that accepts every command and stays armed whatever it is told.
+    #[derive(Default)]
+    struct StubbornVehicle {
+        commands: Mutex<Vec<Command>>,
+    }
+
+    impl VehicleLink for StubbornVehicle {
+        fn name(&self) -> String {
+            "stubborn".into()
+        }
+        fn set_sticks(&self, _sticks: Option<Sticks>) {}
+        fn command(&self, command: Command) -> Result<(), CommandError> {
+            self.commands
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .push(command);
+            Ok(())
+        }
+        fn telemetry(&self) -> Telemetry {
+            Telemetry {
+                armed: Some(true),
+                height_m: Some(0.9),
+                ..Telemetry::default()
+            }
+        }
+        fn status(&self) -> LinkStatus {
+            LinkStatus {
+                state: LinkState::Connected,
+                last_message_age: Some(std::time::Duration::from_millis(50)),
+                transport_up: true,
+                connections: 1,
+                frames_ok: 1,
+                frames_bad: 0,
+            }
+        }
+        fn take_status_texts(&self) -> Vec<StatusText> {
+            vec![]
+        }
+    }
+
+    #[test]
+    fn land_is_sent_again_while_the_vehicle_stays_armed() {
+        let vehicle = Arc::new(StubbornVehicle::default());
+        let config = DroneConfig::default();
+        let mut drone = Drone::new(
+            0,
+            DroneSpec {
+                name: "drone 1".into(),
+                link: vehicle.clone(),
+                start_sequence: StartSequence::Mavlink,
+                altitude: 0.9,
+                start: Some([0.0, 0.0, 0.0]),
+            },
+            &config,
+            0.0,
+        );
+        drone.phase = Phase::Exploring;
+        drone.land();
+        let lands = || {
+            vehicle
+                .commands
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .iter()
+                .filter(|c| **c == Command::Land)
+                .count()
+        };
+        let mut t = 0.0;
+        let mut tick_until = |end: f64, drone: &mut Drone| {
+            while t < end {
+                t += 0.1;
+                drone.tick(t, &config);
+                // Commands answer on their own threads.
+                std::thread::sleep(std::time::Duration::from_millis(1));
+            }
+        };
+        tick_until(config.land_retry_s - 1.0, &mut drone);
+        assert_eq!(lands(), 1, "once, then patience");
+        tick_until(config.land_retry_s + 1.0, &mut drone);
+        let waited = std::time::Instant::now();
+        while lands() < 2 && waited.elapsed() < std::time::Duration::from_secs(2) {
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+        assert_eq!(lands(), 2, "still armed: sent again");
+        assert_eq!(drone.phase, Phase::Landing);
+        assert!(
+            drone
+                .take_messages()
+                .iter()
+                .any(|m| m.contains("sending it again"))
+        );
+    }
+}
