@@ -65,7 +65,6 @@ impl WindowArgs {
             screenshot_at: self.screenshot_at,
             quit_after: self.quit_after,
             frame_stats: self.frame_stats,
-            size: None,
         }
     }
 

@@ -81,8 +81,6 @@ pub struct WindowOptions {
     pub quit_after: Option<f64>,
     /// Repaint continuously and print frame-time statistics when the window closes.
     pub frame_stats: bool,
-    /// Window size in points.
-    pub size: Option<[f32; 2]>,
 }
 
 /// Frame times, for `--frame-stats`.
@@ -96,6 +94,17 @@ struct FrameStats {
 }
 
 impl FrameStats {
+    /// Takes a frame whose UI building began at `started`.
+    fn record(&mut self, started: Instant) {
+        let now = Instant::now();
+        self.build_ms
+            .push(now.duration_since(started).as_secs_f64() * 1e3);
+        if let Some(last) = self.last.replace(now) {
+            self.interval_ms
+                .push(now.duration_since(last).as_secs_f64() * 1e3);
+        }
+    }
+
     fn report(&self) -> String {
         fn describe(v: &[f64]) -> String {
             if v.is_empty() {
@@ -225,26 +234,13 @@ impl GcsApp {
         self.confirmation(ui.ctx());
         self.script(ui.ctx(), &snapshot);
 
-        let now = Instant::now();
-        self.stats
-            .build_ms
-            .push(now.duration_since(started).as_secs_f64() * 1e3);
-        if let Some(last) = self.stats.last.replace(now) {
-            self.stats
-                .interval_ms
-                .push(now.duration_since(last).as_secs_f64() * 1e3);
-        }
         if self.options.frame_stats {
+            self.stats.record(started);
             ui.ctx().request_repaint();
         } else {
             // Snapshots come at the control rate (10 Hz).
             ui.ctx().request_repaint_after(Duration::from_millis(100));
         }
-    }
-
-    /// Frame-time statistics of the frames drawn so far.
-    pub fn frame_report(&self) -> String {
-        self.stats.report()
     }
 
     fn send(&self, command: Operator) {
@@ -523,51 +519,28 @@ impl eframe::App for GcsApp {
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
         self.show(ui);
     }
+
+    fn on_exit(&mut self, _gl: Option<&eframe::glow::Context>) {
+        if self.options.frame_stats {
+            eprintln!("gui: {}", self.stats.report());
+        }
+    }
 }
 
-/// Opens the window on `station` and returns when it is closed; `app` gets the window's frame
-/// statistics printed if asked.
+/// Opens the window on `station` and returns when it is closed (printing the frame-time
+/// statistics then, if asked).
 pub fn run_window(station: Station, options: WindowOptions) -> Result<(), eframe::Error> {
-    let size = options.size.unwrap_or([1400.0, 860.0]);
     let native = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default()
             .with_title(format!("gcs — {}", station.title))
-            .with_inner_size(size),
+            .with_inner_size([1400.0, 860.0]),
         ..eframe::NativeOptions::default()
     };
-    let frame_stats = options.frame_stats;
-    let report = Arc::new(Mutex::new(None));
-    let out = report.clone();
     eframe::run_native(
         "gcs",
         native,
-        Box::new(move |_cc| {
-            Ok(Box::new(Reporting {
-                app: GcsApp::with_options(station, options),
-                out,
-            }))
-        }),
-    )?;
-    if frame_stats && let Some(r) = report.lock().unwrap_or_else(PoisonError::into_inner).take() {
-        eprintln!("gui: {r}");
-    }
-    Ok(())
-}
-
-/// The app, handing its frame statistics out when the window closes.
-struct Reporting {
-    app: GcsApp,
-    out: Arc<Mutex<Option<String>>>,
-}
-
-impl eframe::App for Reporting {
-    fn ui(&mut self, ui: &mut egui::Ui, frame: &mut eframe::Frame) {
-        self.app.ui(ui, frame);
-    }
-
-    fn on_exit(&mut self, _gl: Option<&eframe::glow::Context>) {
-        *self.out.lock().unwrap_or_else(PoisonError::into_inner) = Some(self.app.frame_report());
-    }
+        Box::new(move |_cc| Ok(Box::new(GcsApp::with_options(station, options)))),
+    )
 }
 
 #[cfg(test)]
