@@ -23,3 +23,21 @@ cp "$here/../sitl/worlds/apartment.txt" "$here/corpus/world_text/"
 for f in "$data"/*.tlog; do
   head -c 4096 "$f" | tail -c 4000 > "$here/corpus/sitl_autopilot/$(basename "$f" .tlog).raw"
 done
+# Maps (YAML, a NUL byte, the image), pose graphs, a fleet file, and the head of a mission log.
+mkdir -p "$here/corpus/map_files" "$here/corpus/g2o_loader" "$here/corpus/fleet_config" "$here/corpus/mission_log"
+shared="$here/../../shared/data"
+{ cat "$shared/maps/building_31.yaml"; printf '\0'; cat "$shared/maps/building_31.png"; } > "$here/corpus/map_files/building_31"
+{ cat "$shared/maps/willow-full.yaml"; printf '\0'; head -c 2048 "$shared/maps/willow-full.pgm"; } > "$here/corpus/map_files/willow-head"
+for f in "$shared"/posegraph/*.g2o; do
+  head -c 4096 "$f" > "$here/corpus/g2o_loader/$(basename "$f" .g2o)"
+done
+sed -n '/^\/\/! ```toml/,/^\/\/! ```$/p' "$here/../gcs/src/fleet_file.rs" | sed '1d;$d' | sed 's/^\/\/! \{0,1\}//' \
+  > "$here/corpus/fleet_config/example.toml"
+# A short mission's log, cut to its first 64 KiB (the setup and first frames): the reader must
+# stop cleanly where a crash would have cut it.
+log="$(mktemp -d)"
+(cd "$here/.." && cargo run --quiet --release -p gcs -- explore --timeout 3 --out "$log" >/dev/null 2>&1) || true
+if [ -f "$log/mission.mcap" ]; then
+  head -c 65536 "$log/mission.mcap" > "$here/corpus/mission_log/mission-head.mcap"
+fi
+rm -rf "$log"

@@ -5,6 +5,7 @@
 //! mission runtime explores until no reachable frontier is left and lands every drone; the map,
 //! the trajectories, the MCAP log (and `.tlog`s of MAVLink traffic) and a summary are written.
 
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -76,6 +77,10 @@ pub struct ExploreArgs {
     /// demonstrations; the others must finish the map).
     #[arg(long, value_name = "K@T")]
     pub kill_link: Option<String>,
+    /// Write every drone's true and flown pose, SLAM state and σ at 10 Hz to this CSV file
+    /// (to see where and why a drone flew off its true pose).
+    #[arg(long, value_name = "FILE.csv")]
+    pub pose_trace: Option<PathBuf>,
     /// Show the run in the operator's window (the run goes on headless if it is closed).
     #[arg(long)]
     pub gui: bool,
@@ -344,6 +349,20 @@ fn watch(
     let mut next_progress = t0;
     let mut next_truth = t0;
     let mut killed = false;
+    let mut trace = match &args.pose_trace {
+        Some(path) => {
+            let mut f = std::io::BufWriter::new(
+                std::fs::File::create(path)
+                    .with_context(|| format!("cannot create {}", path.display()))?,
+            );
+            writeln!(
+                f,
+                "time_s,drone,phase,slam,true_x,true_y,true_z,true_yaw,flown_x,flown_y,flown_z,flown_yaw,sigma_m"
+            )?;
+            Some(f)
+        }
+        None => None,
+    };
     while !runtime.finished() {
         let now = clock.now();
         let s = runtime.snapshot();
@@ -353,6 +372,30 @@ fn watch(
             next_truth += 0.1;
             for (k, p) in truth(&sitl).into_iter().enumerate() {
                 truth_tracks[k].push((now, p));
+                if let (Some(f), Some(d)) = (trace.as_mut(), s.drones.get(k))
+                    && let Err(e) = {
+                        let flown = d.pose.map_or_else(
+                            || ",,,".to_owned(),
+                            |e| format!("{:.3},{:.3},{:.3},{:.4}", e[0], e[1], e[2], e[3]),
+                        );
+                        writeln!(
+                            f,
+                            "{now:.2},{},{},{},{:.3},{:.3},{:.3},{:.4},{flown},{:.3}",
+                            k + 1,
+                            d.phase.name(),
+                            d.slam.name(),
+                            p[0],
+                            p[1],
+                            p[2],
+                            p[3],
+                            d.pose_sigma
+                        )
+                    }
+                {
+                    // A diagnostic: the mission goes on without it.
+                    eprintln!("explore: pose trace stopped: {e}");
+                    trace = None;
+                }
                 if let Some(e) = s
                     .drones
                     .get(k)
@@ -402,6 +445,9 @@ fn watch(
             break;
         }
         std::thread::sleep(Duration::from_millis(5));
+    }
+    if let Some(Err(e)) = trace.as_mut().map(Write::flush) {
+        eprintln!("explore: pose trace incomplete: {e}");
     }
     let last_snapshot = runtime.snapshot();
     let report = runtime

@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use link::mavlink::{MavlinkConfig, MavlinkLink};
 use link::shield::{ShieldConfig, ShieldLink};
-use link::{LinkState, VehicleLink};
+use link::{LinkState, VehicleClock, VehicleLink};
 use nalgebra::Isometry3;
 use sitl::{Camera, EndpointSpec, Protocol, SimConfig, Sitl, SitlConfig, World};
 use slam::system::RobotSetup;
@@ -120,10 +120,11 @@ impl SimFleet {
                 .tlog_dir
                 .as_ref()
                 .map(|d| d.join(format!("drone{}.tlog", k + 1)));
+            let sim_clock = sitl.clock();
             let link = connect(
                 config.link,
                 &format!("tcpout:127.0.0.1:{port}"),
-                config.speed,
+                VehicleClock::new(config.speed, move || sim_clock.now()),
                 tlog.as_deref(),
                 None,
             )
@@ -205,13 +206,14 @@ impl SimFleet {
     }
 }
 
-/// Connects a link to one vehicle and waits until it is heard. Timeouts on simulated vehicles
-/// count simulated time, so the station's rates per simulated second stay as in real time.
-/// MAVLink traffic is recorded to `tlog` when given.
+/// Connects a link to one vehicle and waits until it is heard. Heartbeat timeouts count the
+/// vehicle's `clock` (simulated time for a simulated vehicle, so a simulation held up is not a
+/// lost link) and the station's rates scale with its speed, so they stay per simulated second
+/// as in real time. MAVLink traffic is recorded to `tlog` when given.
 pub fn connect(
     kind: LinkKind,
     address: &str,
-    speed: f64,
+    clock: VehicleClock,
     tlog: Option<&std::path::Path>,
     channel_map: Option<link::ChannelMap>,
 ) -> anyhow::Result<Arc<dyn VehicleLink>> {
@@ -221,8 +223,8 @@ pub fn connect(
             let link = MavlinkLink::connect(
                 &address,
                 MavlinkConfig {
-                    heartbeat_period: Duration::from_secs_f64(1.0 / speed),
-                    rc_rate_hz: (20.0 * speed).min(400.0),
+                    rc_rate_hz: (20.0 * clock.speed()).min(400.0),
+                    clock,
                     channel_map: channel_map
                         .unwrap_or_else(|| MavlinkConfig::default().channel_map),
                     ..MavlinkConfig::default()
@@ -241,7 +243,7 @@ pub fn connect(
             &address,
             ShieldConfig {
                 rc_rate_hz: 50.0,
-                heartbeat_period: Duration::from_secs_f64((0.2 / speed).max(0.05)),
+                clock,
                 channel_map: channel_map.unwrap_or_else(|| ShieldConfig::default().channel_map),
                 ..ShieldConfig::default()
             },

@@ -3,35 +3,25 @@
 //! (`link/CAMERA.md`), all on the wall clock. `sitl run` in another process is such a fleet, and
 //! so is ArduPilot SITL given a camera (see the README).
 //!
-//! ```toml
-//! [[vehicle]]
-//! name = "alpha"                       # optional; "drone K" otherwise
-//! protocol = "mavlink"                 # or "shield"
-//! address = "tcpout:127.0.0.1:5760"    # as everywhere: serial:, tcpout:, tcpin:, udpin:, udpout:
-//! camera = "tcpout:127.0.0.1:5900"     # the TCP frame stream carrying its camera
-//! camera_id = 0                        # its vehicle id in that stream (default: its order there)
-//! start = [1.0, 7.5, 0.0]              # x, y (metres), yaw (radians) in the map, if known
-//! altitude = 0.9                       # its altitude band, metres (default 0.9 + 0.15·K)
-//! channels = "ardupilot"               # or "thesis" (the thesis's reversed Naza wiring)
-//! ```
+//! The fleet file is described in [`gcs::fleet_file`].
 
 use std::collections::BTreeMap;
 use std::io::BufReader;
 use std::net::TcpStream;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::mpsc::{SyncSender, sync_channel};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use clap::Args;
+use link::VehicleClock;
 use link::camera::RgbdFrame;
-use link::{Address, ChannelMap};
-use serde::Deserialize;
 use slam::system::{RobotSetup, Slam, SlamConfig};
 
 use gcs::clock::{Clock, WallClock};
-use gcs::fleet::{LinkKind, altitude_band, connect, sim_body_from_camera};
+use gcs::fleet::{LinkKind, connect, sim_body_from_camera};
+use gcs::fleet_file::{self, Vehicle};
 use gcs::gui::Station;
 use gcs::outputs;
 use gcs::record::{Record, Recorder, Setup, SetupDrone};
@@ -61,40 +51,6 @@ pub struct FlyArgs {
     pub no_log: bool,
 }
 
-/// The fleet file.
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct FleetFile {
-    #[serde(default)]
-    vehicle: Vec<VehicleEntry>,
-}
-
-/// One `[[vehicle]]`.
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct VehicleEntry {
-    name: Option<String>,
-    protocol: String,
-    address: String,
-    camera: String,
-    camera_id: Option<u8>,
-    start: Option<[f64; 3]>,
-    altitude: Option<f64>,
-    channels: Option<String>,
-}
-
-/// A vehicle of the fleet, checked.
-struct Vehicle {
-    name: String,
-    kind: LinkKind,
-    address: String,
-    camera: Address,
-    camera_id: u8,
-    start: Option<[f64; 3]>,
-    altitude: f64,
-    channels: Option<ChannelMap>,
-}
-
 /// The end of a flight, as written to `summary.json`.
 #[derive(Debug, serde::Serialize)]
 struct FlySummary {
@@ -117,71 +73,6 @@ struct FlyDrone {
     final_phase: &'static str,
 }
 
-/// Reads and checks a fleet file; every error names the vehicle and the field.
-fn load_fleet(path: &Path) -> anyhow::Result<Vec<Vehicle>> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read the fleet file {}", path.display()))?;
-    let file: FleetFile =
-        toml::from_str(&text).with_context(|| format!("{} is not a fleet file", path.display()))?;
-    if file.vehicle.is_empty() || file.vehicle.len() > 8 {
-        bail!(
-            "{}: {} [[vehicle]] tables; a fleet has 1 to 8",
-            path.display(),
-            file.vehicle.len()
-        );
-    }
-    let mut per_camera: BTreeMap<String, u8> = BTreeMap::new();
-    file.vehicle
-        .into_iter()
-        .enumerate()
-        .map(|(k, v)| {
-            let which = format!("{}: vehicle {}", path.display(), k + 1);
-            let kind = match v.protocol.as_str() {
-                "mavlink" => LinkKind::Mavlink,
-                "shield" => LinkKind::Shield,
-                other => bail!("{which}: protocol {other:?} must be \"mavlink\" or \"shield\""),
-            };
-            v.address
-                .parse::<Address>()
-                .with_context(|| format!("{which}: address"))?;
-            let camera: Address = v
-                .camera
-                .parse()
-                .with_context(|| format!("{which}: camera"))?;
-            let order = per_camera.entry(v.camera.clone()).or_insert(0);
-            let camera_id = v.camera_id.unwrap_or(*order);
-            *order += 1;
-            if let Some(s) = v.start
-                && !s.iter().all(|x| x.is_finite())
-            {
-                bail!("{which}: start {s:?} must be finite x, y, yaw");
-            }
-            let altitude = v.altitude.unwrap_or_else(|| altitude_band(k));
-            if !(altitude.is_finite() && (0.3..=2.5).contains(&altitude)) {
-                bail!("{which}: altitude {altitude} must be 0.3 to 2.5 metres");
-            }
-            let channels = match v.channels.as_deref() {
-                None => None,
-                Some("ardupilot") => Some(ChannelMap::ardupilot()),
-                Some("thesis") => Some(ChannelMap::thesis_naza()),
-                Some(other) => {
-                    bail!("{which}: channels {other:?} must be \"ardupilot\" or \"thesis\"")
-                }
-            };
-            Ok(Vehicle {
-                name: v.name.unwrap_or_else(|| format!("drone {}", k + 1)),
-                kind,
-                address: v.address,
-                camera,
-                camera_id,
-                start: v.start,
-                altitude,
-                channels,
-            })
-        })
-        .collect()
-}
-
 /// Runs `gcs fly`.
 pub fn run(args: &FlyArgs) -> anyhow::Result<()> {
     run_with(args, None)
@@ -197,7 +88,7 @@ pub fn run_with(args: &FlyArgs, window: Option<Window>) -> anyhow::Result<()> {
             args.timeout
         );
     }
-    let fleet = load_fleet(&args.config)?;
+    let fleet = fleet_file::load(&args.config)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create the output folder {}", args.out.display()))?;
     let clock: Arc<dyn Clock> = Arc::new(WallClock::start());
@@ -218,8 +109,14 @@ pub fn run_with(args: &FlyArgs, window: Option<Window>) -> anyhow::Result<()> {
     for (k, v) in fleet.iter().enumerate() {
         let tlog = (!args.no_log && v.kind == LinkKind::Mavlink)
             .then(|| args.out.join(format!("drone{}.tlog", k + 1)));
-        let link = connect(v.kind, &v.address, 1.0, tlog.as_deref(), v.channels)
-            .with_context(|| format!("{} at {}", v.name, v.address))?;
+        let link = connect(
+            v.kind,
+            &v.address,
+            VehicleClock::wall(),
+            tlog.as_deref(),
+            v.channels,
+        )
+        .with_context(|| format!("{} at {}", v.name, v.address))?;
         drones.push(DroneSpec {
             name: v.name.clone(),
             link,

@@ -5,7 +5,9 @@
 pub mod clock;
 pub mod evaluate;
 pub mod fleet;
+pub mod fleet_file;
 pub mod gui;
+pub mod mission_log;
 pub mod outputs;
 pub mod record;
 pub mod runtime;

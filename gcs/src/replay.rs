@@ -7,23 +7,19 @@
 //! runs in step with the frames (deterministic) rather than in the background: small
 //! differences are expected, large ones point at a problem worth a look.
 
-use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
-use std::sync::Arc;
+use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::Args;
-use foxglove::Decode;
-use foxglove::messages::{CameraCalibration, CompressedImage, Grid as FoxGrid, PoseInFrame};
-use link::camera::{Intrinsics, RgbdFrame};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 use nav::grid::{Cell, Grid};
 use slam::system::{RobotSetup, Slam, SlamConfig};
 use slam::trajectory::Stamped;
 
+use gcs::mission_log;
 use gcs::outputs;
-use gcs::record::{DroneState, Setup};
-use gcs::runtime::perception::{CameraFrame, SensorSample, slam_frame};
+use gcs::record::DroneState;
+use gcs::runtime::perception::{SensorSample, slam_frame};
 
 /// Arguments of `gcs replay`.
 #[derive(Args, Debug, Clone)]
@@ -85,22 +81,9 @@ pub struct DroneComparison {
     pub lost_frames: usize,
 }
 
-/// A recorded mission, as replay needs it.
-struct MissionLog {
-    setup: Setup,
-    /// Camera frames in log order.
-    frames: Vec<CameraFrame>,
-    /// Per drone: (time, state) in time order.
-    states: Vec<Vec<DroneState>>,
-    /// The last recorded 2D map.
-    grid: Option<Grid>,
-    messages: usize,
-    truncated: bool,
-}
-
 /// Runs `gcs replay`.
 pub fn run(args: &ReplayArgs) -> anyhow::Result<()> {
-    let log = read_log(&args.log)?;
+    let log = mission_log::load(&args.log)?;
     if args.truth_poses && log.frames.iter().all(|f| f.truth.is_none()) {
         bail!(
             "{} has no true camera poses (/droneK/camera/truth): it was not recorded in the simulator; replay without --truth-poses",
@@ -233,202 +216,6 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Reads what replay needs from a mission log; stops at the first unreadable message (a log cut
-/// short by a crash) and says so.
-fn read_log(path: &Path) -> anyhow::Result<MissionLog> {
-    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let not_mcap = || {
-        format!(
-            "{} is not an MCAP file (expected a mission.mcap written by gcs explore)",
-            path.display()
-        )
-    };
-    if !bytes.starts_with(mcap::MAGIC) {
-        bail!(not_mcap());
-    }
-    let stream = mcap::MessageStream::new(&bytes).with_context(not_mcap)?;
-    let mut setup = None;
-    let mut states: BTreeMap<usize, Vec<DroneState>> = BTreeMap::new();
-    let mut grid = None;
-    // Per drone: the latest calibration, and colour and depth waiting for their partner.
-    let mut calibration: BTreeMap<usize, CameraCalibration> = BTreeMap::new();
-    let mut colour: BTreeMap<usize, (u64, Vec<u8>)> = BTreeMap::new();
-    let mut depth: BTreeMap<usize, (u64, Vec<u16>, u32, u32)> = BTreeMap::new();
-    let mut frames = vec![];
-    let mut truths: BTreeMap<(usize, u64), Isometry3<f64>> = BTreeMap::new();
-    let (mut messages, mut truncated) = (0, false);
-    for m in stream {
-        let m = match m {
-            Ok(m) => m,
-            Err(e) => {
-                tracing::debug!("log read stops: {e}");
-                truncated = true;
-                break;
-            }
-        };
-        messages += 1;
-        let topic = m.channel.topic.as_str();
-        let drone = drone_of(topic);
-        match (topic, drone) {
-            ("/setup", _) => {
-                setup = Some(
-                    serde_json::from_slice::<Setup>(&m.data)
-                        .context("the log's /setup is not a gcs setup")?,
-                );
-            }
-            ("/map", _) => {
-                if let Ok(g) = FoxGrid::decode(&m.data[..]) {
-                    grid = grid_of(&g);
-                }
-            }
-            (t, Some(k)) if t.ends_with("/state") => {
-                if let Ok(s) = serde_json::from_slice::<DroneState>(&m.data) {
-                    states.entry(k).or_default().push(s);
-                }
-            }
-            (t, Some(k)) if t.ends_with("/camera/truth") => {
-                if let Ok(p) = PoseInFrame::decode(&m.data[..])
-                    && let Some(pose) = isometry_of(&p)
-                {
-                    truths.insert((k, m.log_time), pose);
-                }
-            }
-            (t, Some(k)) if t.ends_with("/camera/calibration") => {
-                if let Ok(c) = CameraCalibration::decode(&m.data[..]) {
-                    calibration.insert(k, c);
-                }
-            }
-            (t, Some(k)) if t.ends_with("/camera/color") => {
-                let Ok(c) = CompressedImage::decode(&m.data[..]) else {
-                    continue;
-                };
-                match image::load_from_memory(&c.data) {
-                    Ok(img) => {
-                        colour.insert(k, (m.log_time, img.into_rgb8().into_raw()));
-                    }
-                    Err(e) => tracing::warn!("drone {} colour frame unreadable: {e}", k + 1),
-                }
-            }
-            (t, Some(k)) if t.ends_with("/camera/depth") => {
-                let Ok(c) = CompressedImage::decode(&m.data[..]) else {
-                    continue;
-                };
-                match image::load_from_memory(&c.data) {
-                    Ok(img) => {
-                        let d = img.into_luma16();
-                        let (w, h) = d.dimensions();
-                        depth.insert(k, (m.log_time, d.into_raw(), w, h));
-                    }
-                    Err(e) => tracing::warn!("drone {} depth frame unreadable: {e}", k + 1),
-                }
-            }
-            _ => {}
-        }
-        // A frame is whole once its colour, depth and calibration are in, at one time.
-        if let Some(k) = drone
-            && let (Some((tc, _)), Some((td, ..)), Some(cal)) =
-                (colour.get(&k), depth.get(&k), calibration.get(&k))
-            && tc == td
-            && cal.k.len() == 9
-        {
-            let (Some((t, rgb)), Some((_, d, w, h))) = (colour.remove(&k), depth.remove(&k)) else {
-                continue;
-            };
-            if rgb.len() != (w * h * 3) as usize {
-                continue;
-            }
-            frames.push(CameraFrame {
-                drone: k,
-                stamp: t as f64 * 1e-9,
-                frame: Arc::new(RgbdFrame {
-                    vehicle: u8::try_from(k).unwrap_or(u8::MAX),
-                    stamp: std::time::Duration::from_nanos(t),
-                    width: w,
-                    height: h,
-                    intrinsics: Intrinsics {
-                        fx: cal.k[0] as f32,
-                        fy: cal.k[4] as f32,
-                        cx: cal.k[2] as f32,
-                        cy: cal.k[5] as f32,
-                    },
-                    rgb,
-                    depth_mm: d,
-                }),
-                truth: None,
-            });
-        }
-    }
-    let Some(setup) = setup else {
-        bail!(
-            "{} has no /setup message: not a log of gcs explore, or cut before its first second",
-            path.display()
-        );
-    };
-    for f in &mut frames {
-        f.truth = truths
-            .get(&(f.drone, f.frame.stamp.as_nanos() as u64))
-            .copied();
-    }
-    let n = setup.drones.len();
-    Ok(MissionLog {
-        states: (0..n)
-            .map(|k| states.remove(&k).unwrap_or_default())
-            .collect(),
-        setup,
-        frames,
-        grid,
-        messages,
-        truncated,
-    })
-}
-
-/// A recorded pose as an isometry (`None` when incomplete or not a rotation).
-fn isometry_of(p: &PoseInFrame) -> Option<Isometry3<f64>> {
-    let pose = p.pose.as_ref()?;
-    let (v, q) = (pose.position.as_ref()?, pose.orientation.as_ref()?);
-    let q = Quaternion::new(q.w, q.x, q.y, q.z);
-    let norm = q.norm();
-    (norm.is_finite() && (norm - 1.0).abs() < 1e-3 && v.x.is_finite() && v.y.is_finite()).then(
-        || {
-            Isometry3::from_parts(
-                Translation3::new(v.x, v.y, v.z),
-                UnitQuaternion::from_quaternion(q),
-            )
-        },
-    )
-}
-
-/// The drone index of a `/droneK/...` topic.
-fn drone_of(topic: &str) -> Option<usize> {
-    let rest = topic.strip_prefix("/drone")?;
-    let digits: String = rest.chars().take_while(char::is_ascii_digit).collect();
-    digits.parse::<usize>().ok()?.checked_sub(1)
-}
-
-/// A recorded `foxglove.Grid` (int8 occupancy, as the recorder writes it) as a map.
-fn grid_of(g: &FoxGrid) -> Option<Grid> {
-    let w = g.column_count as usize;
-    let res = g.cell_size.as_ref()?.x;
-    if w == 0 || g.cell_stride != 1 || g.row_stride as usize != w || !res.is_finite() || res <= 0.0
-    {
-        return None;
-    }
-    let h = g.data.len() / w;
-    let o = g.pose.as_ref()?.position.as_ref()?;
-    let mut grid = Grid::new(w, h, res, [o.x, o.y], Cell::Unknown);
-    for y in 0..h {
-        for x in 0..w {
-            let cell = match g.data[y * w + x] as i8 {
-                0 => Cell::Free,
-                100 => Cell::Occupied,
-                _ => Cell::Unknown,
-            };
-            grid.set((x, y), cell);
-        }
-    }
-    Some(grid)
-}
-
 /// The latest sample of a drone's state at or before `t`.
 fn sample_at(states: &[DroneState], t: f64) -> Option<SensorSample> {
     let i = states.partition_point(|s| s.t <= t).checked_sub(1)?;
@@ -502,14 +289,6 @@ fn compare_tracks(replayed: &[(f64, [f64; 2])], recorded: &[DroneState]) -> (usi
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn drone_topics_name_their_drone() {
-        assert_eq!(drone_of("/drone1/camera/color"), Some(0));
-        assert_eq!(drone_of("/drone12/state"), Some(11));
-        assert_eq!(drone_of("/drone0/state"), None);
-        assert_eq!(drone_of("/map"), None);
-    }
 
     #[test]
     fn a_map_agrees_with_itself_and_less_with_a_shifted_copy() {

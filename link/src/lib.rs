@@ -23,7 +23,7 @@ pub mod transport;
 pub mod vehicle;
 
 pub use address::{Address, AddressError};
-pub use heartbeat::{HeartbeatMonitor, LinkState};
+pub use heartbeat::{HeartbeatMonitor, LinkState, VehicleClock};
 pub use rc::{Axis, Channel, ChannelMap, Pulses, Sticks};
 pub use transport::{Connection, Transport, TransportError};
 pub use vehicle::{

@@ -169,11 +169,26 @@ impl Grid {
             path: yaml_path.into(),
             source,
         })?;
+        Self::from_map_server(yaml_path, &text, |image_path| {
+            std::fs::read(image_path).map_err(|source| MapError::Io {
+                path: image_path.into(),
+                source,
+            })
+        })
+    }
+
+    /// A `map_server` map from its YAML's text (`yaml_path` names it in errors and places the
+    /// image) and a reader of the image file it names, as [`Grid::load`] does.
+    pub fn from_map_server(
+        yaml_path: &Path,
+        text: &str,
+        read_image: impl FnOnce(&Path) -> Result<Vec<u8>, MapError>,
+    ) -> Result<Self, MapError> {
         let yaml_err = |reason: String| MapError::Yaml {
             path: yaml_path.into(),
             reason,
         };
-        let meta: MapYaml = serde_yaml_ng::from_str(&text).map_err(|e| yaml_err(e.to_string()))?;
+        let meta: MapYaml = serde_yaml_ng::from_str(text).map_err(|e| yaml_err(e.to_string()))?;
         if !(meta.resolution.is_finite() && meta.resolution > 0.0) {
             return Err(yaml_err(format!(
                 "resolution {} must be a positive number of metres",
@@ -211,7 +226,8 @@ impl Grid {
             .parent()
             .unwrap_or(Path::new("."))
             .join(&meta.image);
-        let img = image::open(&image_path)
+        let bytes = read_image(&image_path)?;
+        let img = image::load_from_memory(&bytes)
             .map_err(|e| MapError::Image {
                 path: image_path.clone(),
                 reason: e.to_string(),

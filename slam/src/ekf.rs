@@ -72,6 +72,11 @@ pub struct EkfConfig {
     /// A SLAM fix this far (metres) and five standard deviations from a valid estimate is
     /// refused: loop-closure corrections are real jumps but bounded, a wild pose is not.
     pub max_slam_jump_m: f64,
+    /// While the rangefinder holds the height, a SLAM fix further than this (metres) from it is
+    /// refused: a registration that wrong in height is wrong (a repeated pattern matched a
+    /// block up or down), not a map correction, and taking it as one would fly the vehicle
+    /// into the floor.
+    pub max_slam_height_error_m: f64,
 }
 
 impl Default for EkfConfig {
@@ -95,6 +100,7 @@ impl Default for EkfConfig {
             gate_chi2: 16.0,
             max_position_sigma: 0.35,
             max_slam_jump_m: 2.0,
+            max_slam_height_error_m: 0.3,
         }
     }
 }
@@ -155,6 +161,8 @@ pub struct Ekf {
     /// Recent (time, state), to compare late measurements with.
     history: VecDeque<(f64, State)>,
     outliers: u64,
+    /// When a rangefinder height was last taken.
+    height_at: Option<f64>,
 }
 
 /// No state speed beyond this, m/s.
@@ -187,6 +195,7 @@ impl Ekf {
             fixed: false,
             history: VecDeque::new(),
             outliers: 0,
+            height_at: None,
         }
     }
 
@@ -414,6 +423,13 @@ impl Ekf {
             }
         }
         let z = [position[0], position[1], position[2], yaw];
+        if self.height_at.is_some_and(|h| (t - h).abs() < 1.0)
+            && let Some(then) = self.state_at(t)
+            && (position[2] - then[PZ]).abs() > self.config.max_slam_height_error_m
+        {
+            self.outliers += 1;
+            return Update::Outlier;
+        }
         if self.fixed
             && let Some(then) = self.state_at(t)
         {
@@ -472,7 +488,11 @@ impl Ekf {
     /// The rangefinder's height above the floor.
     pub fn update_height(&mut self, t: f64, height: f64) -> Update {
         let r = self.config.height_sigma.powi(2);
-        self.update(t, [PZ], [height], [r], [false], false)
+        let u = self.update(t, [PZ], [height], [r], [false], false);
+        if u == Update::Applied {
+            self.height_at = Some(t);
+        }
+        u
     }
 
     /// The flight controller's roll and pitch.
@@ -571,6 +591,36 @@ mod tests {
         assert_eq!(ekf.outliers(), 2);
         let e = ekf.estimate();
         assert!((e.attitude[2] - 0.5).abs() < 0.01 && (e.position[2] - 1.0).abs() < 0.01);
+    }
+
+    #[test]
+    fn a_slam_fix_off_the_rangefinder_height_is_refused() {
+        let mut ekf = Ekf::new(EkfConfig::default(), 0.0, [1.0, 1.0, 1.0], 0.5);
+        ekf.update_slam(0.0, [1.0, 1.0, 1.0], 0.5);
+        for k in 1..20 {
+            let t = k as f64 * 0.1;
+            ekf.predict(t);
+            assert_eq!(ekf.update_height(t, 1.0), Update::Applied);
+            ekf.update_slam(t, [1.0, 1.0, 1.0], 0.5);
+        }
+        // Seen in flight: a registration 0.9 m high was taken as a map correction, the
+        // rangefinder was then gated out against it, and the height loop flew into the floor.
+        assert_eq!(ekf.update_slam(2.0, [1.2, 1.0, 1.9], 0.5), Update::Outlier);
+        let e = ekf.estimate();
+        assert!((e.position[2] - 1.0).abs() < 0.01, "{e:?}");
+        assert_eq!(ekf.update_height(2.0, 1.0), Update::Applied);
+        // A correction within the rangefinder's height is still a correction.
+        assert_eq!(
+            ekf.update_slam(2.0, [2.0, 1.0, 1.05], 0.5),
+            Update::Corrected
+        );
+        // Without a rangefinder, nothing holds the height: the fix is taken.
+        let mut blind = Ekf::new(EkfConfig::default(), 0.0, [1.0, 1.0, 1.0], 0.5);
+        blind.update_slam(0.0, [1.0, 1.0, 1.0], 0.5);
+        assert_ne!(
+            blind.update_slam(0.1, [1.0, 1.0, 1.9], 0.5),
+            Update::Outlier
+        );
     }
 
     #[test]

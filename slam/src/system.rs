@@ -72,6 +72,10 @@ pub struct SlamConfig {
     pub keyframe_min_inliers: usize,
     /// …unless it agrees with the motion so far within this: metres, radians.
     pub weak_agreement: (f64, f64),
+    /// A registration that puts the body further than this (metres) above or below the height
+    /// its filter predicts (or its rangefinder reads) is wrong, however many inliers it has: a
+    /// wall's repeated pattern matched one block up or down.
+    pub max_height_disagreement: f64,
     /// A loop closure may correct the current estimate by at most this much, metres…
     pub loop_max_correction: f64,
     /// …and radians.
@@ -135,6 +139,7 @@ impl Default for SlamConfig {
             loop_min_inliers: 25,
             keyframe_min_inliers: 25,
             weak_agreement: (0.03, 1f64.to_radians()),
+            max_height_disagreement: 0.3,
             loop_max_correction: 1.0,
             loop_max_correction_angle: 20f64.to_radians(),
             place_candidates: 2,
@@ -842,6 +847,19 @@ impl Slam {
         }
     }
 
+    /// How far (metres) a camera pose puts the body above (+) or below the height the vehicle's
+    /// filter predicts (or, without a prediction, its rangefinder reads), when further than
+    /// [`SlamConfig::max_height_disagreement`].
+    fn height_disagreement(&self, frame: &Frame, map_from_camera: &Isometry3<f64>) -> Option<f64> {
+        let expected = frame
+            .predicted_body
+            .map(|b| b.translation.vector.z)
+            .or(frame.height)?;
+        let camera_from_body = self.robots[frame.robot].setup.body_from_camera.inverse();
+        let off = (map_from_camera * camera_from_body).translation.vector.z - expected;
+        (off.abs() > self.config.max_height_disagreement).then_some(off)
+    }
+
     fn track(&mut self, frame: &Frame, observation: Arc<Observation>) -> FrameReport {
         let k = frame.robot;
         let r = &self.robots[k];
@@ -899,7 +917,7 @@ impl Slam {
                         };
                         found = Some((None, via));
                     }
-                    Err(e) => why = format!("{why}; previous frame: {e}"),
+                    Err(e) => add_reason(&mut why, format!("previous frame: {e}")),
                 }
             }
             if let Some((_, reg)) = &found {
@@ -914,6 +932,11 @@ impl Slam {
                         "implausible motion ({t:.2} m, {:.0}°) rejected",
                         a.to_degrees()
                     );
+                    found = None;
+                } else if let Some(off) =
+                    self.height_disagreement(frame, &(base * reg.reference_from_frame))
+                {
+                    why = format!("registration {off:+.2} m off the predicted height rejected");
                     found = None;
                 }
             }
@@ -938,18 +961,33 @@ impl Slam {
                     Ok(reg) if reg.inliers >= self.config.relocalisation_min_inliers => {
                         let pose = self.nodes[n].pose * reg.reference_from_frame;
                         // A registration far from a good prediction is a wrong match.
-                        let plausible = predicted.is_none_or(|p| {
+                        let near_prediction = predicted.is_none_or(|p| {
                             let d = p.inverse() * pose;
                             d.translation.vector.norm() < 1.0 && d.rotation.angle() < 0.6
                         });
-                        if plausible {
-                            found = Some((Some(n), reg));
-                            relocalised = Some(n);
-                            break;
+                        match self.height_disagreement(frame, &pose) {
+                            None if near_prediction => {
+                                found = Some((Some(n), reg));
+                                relocalised = Some(n);
+                                break;
+                            }
+                            None => add_reason(
+                                &mut why,
+                                format!("keyframe {n}: far from the prediction"),
+                            ),
+                            Some(off) => {
+                                add_reason(
+                                    &mut why,
+                                    format!("keyframe {n}: {off:+.2} m off the predicted height"),
+                                );
+                            }
                         }
                     }
-                    Ok(reg) => why = format!("{why}; keyframe {n}: only {} inliers", reg.inliers),
-                    Err(e) => why = format!("{why}; keyframe {n}: {e}"),
+                    Ok(reg) => add_reason(
+                        &mut why,
+                        format!("keyframe {n}: only {} inliers", reg.inliers),
+                    ),
+                    Err(e) => add_reason(&mut why, format!("keyframe {n}: {e}")),
                 }
             }
         }
@@ -1599,6 +1637,14 @@ fn node_cloud(nodes: &[Node], n: usize) -> Option<NodeCloud> {
             map_from_camera: node.pose,
             cloud: node.cloud.clone(),
         })
+}
+
+/// Appends one more reason a frame could not be placed.
+fn add_reason(why: &mut String, reason: String) {
+    if !why.is_empty() {
+        why.push_str("; ");
+    }
+    why.push_str(&reason);
 }
 
 fn lost(why: String) -> FrameReport {

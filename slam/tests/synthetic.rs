@@ -28,6 +28,11 @@ struct Flight {
     truth: Vec<Vec<Stamped>>,
     lost: Vec<usize>,
     frames: Vec<usize>,
+    /// Give every frame the true body pose as the vehicle's prediction, this far (metres) off
+    /// in height; `None`: no prediction (a hand-held camera).
+    predicted_height_error: Option<f64>,
+    /// Why frames were lost.
+    lost_why: Vec<String>,
 }
 
 fn body_from_camera() -> Isometry3<f64> {
@@ -70,6 +75,8 @@ impl Flight {
             truth: vec![vec![]; drones],
             lost: vec![0; drones],
             frames: vec![0; drones],
+            predicted_height_error: None,
+            lost_why: vec![],
         }
     }
 
@@ -123,7 +130,13 @@ impl Flight {
                     },
                     heading: Some(readings.yaw),
                     height: readings.sonar,
-                    predicted_body: None,
+                    predicted_body: self.predicted_height_error.map(|dz| {
+                        let s = self.sim.vehicle(k).state();
+                        Isometry3::new(
+                            Vector3::new(s.position[0], s.position[1], s.position[2] + dz),
+                            Vector3::z() * s.yaw,
+                        )
+                    }),
                     known_camera_pose: None,
                 })
                 .expect("frame");
@@ -131,6 +144,7 @@ impl Flight {
             if let Tracking::Lost(why) = &report.tracking {
                 eprintln!("drone {} at {t:.1} s: lost: {why}", k + 1);
                 self.lost[k] += 1;
+                self.lost_why.push(why.clone());
             }
             self.truth[k].push(Stamped {
                 t,
@@ -217,6 +231,41 @@ fn a_drone_turning_on_the_spot_is_tracked_and_closes_its_loop() {
     );
     assert!(e < 0.05, "ATE {e:.3} m");
     assert!(f.slam.stats().loop_closures > 0, "the turn closes a loop");
+}
+
+#[test]
+fn on_a_vehicle_registrations_off_its_measured_height_are_refused() {
+    // Hovering and turning, the vehicle's filter predicting its pose; then the same with a
+    // filter whose height is 0.6 m off: no registration can agree with it, so none is taken
+    // (a drone must not fly on a pose its rangefinder contradicts).
+    let run = |height_error: f64| {
+        let mut f = Flight::new(1, &[true], SlamConfig::default());
+        f.predicted_height_error = Some(height_error);
+        let (x, y, yaw) = start_of(&f, 0);
+        f.fly(&[vec![[x, y, 1.0, yaw], [x, y, 1.0, yaw + 0.8]]], 15.0);
+        f
+    };
+    let good = run(0.0);
+    assert!(
+        good.lost[0] * 20 <= good.frames[0],
+        "{} of {} lost",
+        good.lost[0],
+        good.frames[0]
+    );
+    let off = run(0.6);
+    assert!(
+        off.lost[0] + 1 >= off.frames[0],
+        "{} of {} lost",
+        off.lost[0],
+        off.frames[0]
+    );
+    assert!(
+        off.lost_why
+            .iter()
+            .any(|w| w.contains("off the predicted height")),
+        "{:?}",
+        &off.lost_why[..off.lost_why.len().min(3)]
+    );
 }
 
 #[test]

@@ -23,7 +23,7 @@ use ::mavlink::{MavHeader, MavlinkVersion, SigningConfig, SigningData};
 use super::frame::{FrameScanner, RawFrame, encode};
 use super::modes::{copter_custom_mode, copter_mode_name};
 use crate::address::Address;
-use crate::heartbeat::{HeartbeatMonitor, LinkState};
+use crate::heartbeat::{HeartbeatMonitor, LinkState, VehicleClock};
 use crate::rc::{ChannelMap, Sticks};
 use crate::tlog::Recorder;
 use crate::transport::{
@@ -96,8 +96,10 @@ pub struct MavlinkConfig {
     pub version: MavlinkVersion,
     /// RC override frames per second (ArduPilot drops an override 3 s after the last one).
     pub rc_rate_hz: f64,
-    /// Our heartbeat period, and the period we expect from vehicles.
+    /// Our heartbeat period, and the period we expect from vehicles, in the vehicles' time.
     pub heartbeat_period: Duration,
+    /// The time the vehicles live in (wall time for real ones).
+    pub clock: VehicleClock,
     /// Wait this long for a COMMAND_ACK before sending again.
     pub command_timeout: Duration,
     /// Send a command at most this many times.
@@ -118,6 +120,7 @@ impl Default for MavlinkConfig {
             version: MavlinkVersion::V2,
             rc_rate_hz: 20.0,
             heartbeat_period: Duration::from_secs(1),
+            clock: VehicleClock::wall(),
             command_timeout: Duration::from_secs(1),
             command_attempts: 3,
             telemetry_rate_hz: 10.0,
@@ -465,7 +468,7 @@ impl VehicleLink for MavlinkVehicle {
 
     fn status(&self) -> LinkStatus {
         let s = self.rt.shared.lock();
-        let now = Instant::now();
+        let now = self.rt.shared.config.clock.now();
         let v = s.vehicles.get(&self.system_id);
         LinkStatus {
             state: v.map_or(LinkState::Connecting, |v| v.monitor.state(now)),
@@ -536,7 +539,7 @@ fn write_loop(shared: &Shared, mut writer: Writer, alive: &AtomicBool) {
             let now = Instant::now();
             if now >= next_hb {
                 out.push(gcs_heartbeat());
-                next_hb = now + cfg.heartbeat_period;
+                next_hb = now + cfg.clock.wall_period(cfg.heartbeat_period);
             }
             out.extend(s.outbox.drain(..));
             schedule_commands(&mut s, cfg, now, &mut out);
@@ -872,7 +875,7 @@ fn handle_frame(shared: &Shared, frame: &RawFrame, now: Instant) {
         if header.component_id != v.component {
             return; // e.g. a gimbal or companion computer of the same system
         }
-        v.monitor.heard(now);
+        v.monitor.heard(cfg.clock.now());
         v.autopilot = hb.autopilot;
         v.custom_mode = hb.custom_mode;
         v.telemetry.armed = Some(

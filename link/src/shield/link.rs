@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 
 use super::wire::{FrameDecoder, RpytRepr, Special, UpRepr, special_bytes};
 use crate::address::Address;
-use crate::heartbeat::HeartbeatMonitor;
+use crate::heartbeat::{HeartbeatMonitor, VehicleClock};
 use crate::rc::{ChannelMap, Sticks};
 use crate::transport::{
     Connection, Transport, TransportError, Writer, duplex, is_timeout, run_sessions,
@@ -28,8 +28,10 @@ pub struct ShieldConfig {
     pub rc_rate_hz: f64,
     /// The vehicle's wiring.
     pub channel_map: ChannelMap,
-    /// Expected telemetry period: degraded after 1.5, lost after 5 of these.
+    /// Expected telemetry period, in the vehicle's time: degraded after 1.5, lost after 5.
     pub heartbeat_period: Duration,
+    /// The time the vehicle lives in (wall time for a real one).
+    pub clock: VehicleClock,
     /// Wait this long for an acknowledgement before sending again.
     pub ack_timeout: Duration,
     /// Send a special command at most this many times.
@@ -42,6 +44,7 @@ impl Default for ShieldConfig {
             rc_rate_hz: 20.0,
             channel_map: ChannelMap::thesis_naza(),
             heartbeat_period: Duration::from_millis(200),
+            clock: VehicleClock::wall(),
             ack_timeout: Duration::from_millis(500),
             attempts: 3,
         }
@@ -270,14 +273,14 @@ fn read_loop(shared: &Shared, mut reader: Box<dyn Read + Send>, alive: &AtomicBo
                 }
                 Ok(frame) => {
                     s.frames_ok += 1;
-                    apply(&mut s, frame, now);
+                    apply(&mut s, frame, shared.config.clock.now());
                 }
             }
         }
     }
 }
 
-fn apply(s: &mut State, frame: UpRepr, now: Instant) {
+fn apply(s: &mut State, frame: UpRepr, now: Duration) {
     match frame {
         UpRepr::Telemetry(t) => {
             s.monitor.heard(now);
@@ -378,7 +381,7 @@ impl VehicleLink for ShieldLink {
 
     fn status(&self) -> LinkStatus {
         let s = self.shared.lock();
-        let now = Instant::now();
+        let now = self.shared.config.clock.now();
         LinkStatus {
             state: s.monitor.state(now),
             last_message_age: s.monitor.age(now),
