@@ -36,7 +36,7 @@ sed -n '/^\/\/! ```toml/,/^\/\/! ```$/p' "$here/../gcs/src/fleet_file.rs" | sed 
 # A short mission's log, cut to its first 64 KiB (the setup and first frames): the reader must
 # stop cleanly where a crash would have cut it.
 log="$(mktemp -d)"
-(cd "$here/.." && cargo run --quiet --release -p gcs -- explore --timeout 3 --out "$log" >/dev/null 2>&1) || true
+(cd "$here/.." && cargo run --quiet -p gcs -- explore --timeout 3 --out "$log" >/dev/null 2>&1) || true
 if [ -f "$log/mission.mcap" ]; then
   head -c 65536 "$log/mission.mcap" > "$here/corpus/mission_log/mission-head.mcap"
 fi
