@@ -1,5 +1,7 @@
 //! Helpers for the integration tests: real third-party peers (pymavlink in a virtual
-//! environment), free loopback ports, pseudo-terminal pairs.
+//! environment), free loopback ports, pseudo-terminal pairs, and a fault-injecting proxy.
+
+pub mod faults;
 
 use std::io::Read;
 use std::net::{TcpListener, UdpSocket};
