@@ -104,6 +104,7 @@ impl SimFleet {
             vehicles,
             camera: None,
             speed: config.speed,
+            signing_key: None,
         })
         .context("cannot start the simulator")?;
         let clock: Arc<dyn Clock> = Arc::new(SimulatedClock {
@@ -125,8 +126,10 @@ impl SimFleet {
                 config.link,
                 &format!("tcpout:127.0.0.1:{port}"),
                 VehicleClock::new(config.speed, move || sim_clock.now()),
-                tlog.as_deref(),
-                None,
+                LinkOptions {
+                    tlog,
+                    ..LinkOptions::default()
+                },
             )
             .with_context(|| format!("drone {}", k + 1))?;
             drones.push(DroneSpec {
@@ -206,6 +209,17 @@ impl SimFleet {
     }
 }
 
+/// How a link is opened beyond its protocol and address.
+#[derive(Debug, Default)]
+pub struct LinkOptions {
+    /// Record MAVLink traffic to this `.tlog`.
+    pub tlog: Option<std::path::PathBuf>,
+    /// The RC wiring, if not the protocol's default.
+    pub channel_map: Option<link::ChannelMap>,
+    /// Sign MAVLink frames with this key and refuse any not signed with it.
+    pub signing: Option<link::mavlink::SigningKey>,
+}
+
 /// Connects a link to one vehicle and waits until it is heard. Heartbeat timeouts count the
 /// vehicle's `clock` (simulated time for a simulated vehicle, so a simulation held up is not a
 /// lost link) and the station's rates scale with its speed, so they stay per simulated second
@@ -214,9 +228,13 @@ pub fn connect(
     kind: LinkKind,
     address: &str,
     clock: VehicleClock,
-    tlog: Option<&std::path::Path>,
-    channel_map: Option<link::ChannelMap>,
+    options: LinkOptions,
 ) -> anyhow::Result<Arc<dyn VehicleLink>> {
+    let LinkOptions {
+        tlog,
+        channel_map,
+        signing,
+    } = options;
     let address = address.parse()?;
     let link: Arc<dyn VehicleLink> = match kind {
         LinkKind::Mavlink => {
@@ -227,10 +245,11 @@ pub fn connect(
                     clock,
                     channel_map: channel_map
                         .unwrap_or_else(|| MavlinkConfig::default().channel_map),
+                    signing,
                     ..MavlinkConfig::default()
                 },
             )?;
-            if let Some(path) = tlog {
+            if let Some(path) = &tlog {
                 link.record_to(path)
                     .with_context(|| format!("cannot record to {}", path.display()))?;
             }

@@ -11,6 +11,8 @@
 //! start = [1.0, 7.5, 0.0]              # x, y (metres), yaw (radians) in the map, if known
 //! altitude = 0.9                       # its altitude band, metres (default 0.9 + 0.15·K)
 //! channels = "ardupilot"               # or "thesis" (the thesis's reversed Naza wiring)
+//! signing_key = "alpha"                # MAVLink only: sign with this key (`gcs key list`) and
+//!                                      # refuse anything not signed with it
 //! ```
 
 use std::collections::BTreeMap;
@@ -42,6 +44,7 @@ struct VehicleEntry {
     start: Option<[f64; 3]>,
     altitude: Option<f64>,
     channels: Option<String>,
+    signing_key: Option<String>,
 }
 
 /// A vehicle of the fleet, checked.
@@ -63,6 +66,8 @@ pub struct Vehicle {
     pub altitude: f64,
     /// Its RC wiring, if not the protocol's default.
     pub channels: Option<ChannelMap>,
+    /// The MAVLink signing key it uses: a name in the key store or a key file's path.
+    pub signing_key: Option<String>,
 }
 
 /// Reads and checks a fleet file; every error names the vehicle and the field.
@@ -121,6 +126,9 @@ pub fn parse(text: &str, origin: &str) -> anyhow::Result<Vec<Vehicle>> {
                     bail!("{which}: channels {other:?} must be \"ardupilot\" or \"thesis\"")
                 }
             };
+            if v.signing_key.is_some() && kind != LinkKind::Mavlink {
+                bail!("{which}: signing_key: only MAVLink links are signed (the shield protocol has no signatures)");
+            }
             Ok(Vehicle {
                 name: v.name.unwrap_or_else(|| format!("drone {}", k + 1)),
                 kind,
@@ -130,6 +138,7 @@ pub fn parse(text: &str, origin: &str) -> anyhow::Result<Vec<Vehicle>> {
                 start: v.start,
                 altitude,
                 channels,
+                signing_key: v.signing_key,
             })
         })
         .collect()
@@ -145,6 +154,7 @@ protocol = "mavlink"
 address = "tcpout:127.0.0.1:5760"
 camera = "tcpout:127.0.0.1:5900"
 start = [1.0, 7.5, 0.0]
+signing_key = "alpha"
 
 [[vehicle]]
 name = "beta"
@@ -165,6 +175,8 @@ channels = "thesis"
         assert_eq!(fleet[1].kind, LinkKind::Shield);
         assert!(fleet[1].channels.is_some() && fleet[0].channels.is_none());
         assert!(fleet[1].altitude > fleet[0].altitude);
+        assert_eq!(fleet[0].signing_key.as_deref(), Some("alpha"));
+        assert_eq!(fleet[1].signing_key, None);
     }
 
     #[test]
@@ -176,6 +188,8 @@ channels = "thesis"
         assert!(e.contains("vehicle 1: altitude 9"), "{e}");
         let e = err(&TWO.replace("tcpout:127.0.0.1:5760", "carrier-pigeon"));
         assert!(e.contains("vehicle 1: address"), "{e}");
+        let e = err(&TWO.replace("channels = \"thesis\"", "signing_key = \"alpha\""));
+        assert!(e.contains("vehicle 2: signing_key: only MAVLink"), "{e}");
         let e = err("[[vehicle]]\nprotocol = 3\n");
         assert!(e.contains("f.toml is not a fleet file"), "{e}");
         let e = err("");

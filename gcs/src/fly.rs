@@ -20,7 +20,7 @@ use link::camera::RgbdFrame;
 use slam::system::{RobotSetup, Slam, SlamConfig};
 
 use gcs::clock::{Clock, WallClock};
-use gcs::fleet::{LinkKind, connect, sim_body_from_camera};
+use gcs::fleet::{LinkKind, LinkOptions, connect, sim_body_from_camera};
 use gcs::fleet_file::{self, Vehicle};
 use gcs::gui::Station;
 use gcs::outputs;
@@ -28,6 +28,7 @@ use gcs::record::{Record, Recorder, Setup, SetupDrone};
 use gcs::runtime::drone::{DroneSpec, StartSequence};
 use gcs::runtime::perception::CameraFrame;
 use gcs::runtime::{Operator, Outcome, Runtime, RuntimeConfig};
+use link::mavlink::KeyStore;
 
 use crate::gui_cmd::{Window, beside_window};
 
@@ -109,12 +110,23 @@ pub fn run_with(args: &FlyArgs, window: Option<Window>) -> anyhow::Result<()> {
     for (k, v) in fleet.iter().enumerate() {
         let tlog = (!args.no_log && v.kind == LinkKind::Mavlink)
             .then(|| args.out.join(format!("drone{}.tlog", k + 1)));
+        let signing = match &v.signing_key {
+            Some(key) => Some(
+                KeyStore::user()
+                    .and_then(|store| store.load(key))
+                    .with_context(|| format!("{}: signing_key", v.name))?,
+            ),
+            None => None,
+        };
         let link = connect(
             v.kind,
             &v.address,
             VehicleClock::wall(),
-            tlog.as_deref(),
-            v.channels,
+            LinkOptions {
+                tlog,
+                channel_map: v.channels,
+                signing,
+            },
         )
         .with_context(|| format!("{} at {}", v.name, v.address))?;
         drones.push(DroneSpec {

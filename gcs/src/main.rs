@@ -3,6 +3,7 @@
 mod explore;
 mod fly;
 mod gui_cmd;
+mod key_cmd;
 mod plan;
 mod probe;
 mod replay;
@@ -42,6 +43,11 @@ enum Top {
         #[command(subcommand)]
         command: slam_cmd::SlamCommand,
     },
+    /// MAVLink 2 signing keys: make one, give it to a vehicle, turn signing off.
+    Key {
+        #[command(subcommand)]
+        command: key_cmd::KeyCommand,
+    },
     /// Talk to one vehicle link.
     Link {
         #[command(subcommand)]
@@ -71,6 +77,7 @@ fn main() -> ExitCode {
         Top::Replay(args) => replay::run(&args),
         Top::Plan(args) => plan::run(&args),
         Top::Slam { command } => slam_cmd::run(&command),
+        Top::Key { command } => key_cmd::run(&command),
         Top::Link {
             command: LinkCommand::Probe(args),
         } => probe::run(&args),

@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
-use link::mavlink::{MavlinkConfig, MavlinkLink, SigningKey};
+use link::mavlink::{KeyStore, MavlinkConfig, MavlinkLink};
 use link::shield::{ShieldConfig, ShieldLink};
 use link::{Address, ChannelMap, Command, FlightMode, LinkState, Pulses, VehicleLink};
 use serde_json::json;
@@ -47,9 +47,10 @@ pub struct ProbeArgs {
     /// MAVLink system id of the vehicle (default: the first one heard).
     #[arg(long)]
     sysid: Option<u8>,
-    /// File with a 64-hex-digit MAVLink 2 signing key (sign and check every frame).
-    #[arg(long)]
-    signing_key: Option<PathBuf>,
+    /// MAVLink 2 signing key (sign and check every frame): a name in the key store (`gcs key
+    /// list`) or a key file's path.
+    #[arg(long, value_name = "KEY")]
+    signing_key: Option<String>,
     /// Record every MAVLink frame in and out to this `.tlog` file.
     #[arg(long, value_name = "FILE")]
     tlog: Option<PathBuf>,
@@ -194,11 +195,8 @@ pub fn run(args: &ProbeArgs) -> anyhow::Result<()> {
     let vehicle: Arc<dyn VehicleLink> = match args.protocol {
         Protocol::Mavlink => {
             let mut config = MavlinkConfig::default();
-            if let Some(path) = &args.signing_key {
-                let text = std::fs::read_to_string(path).with_context(|| {
-                    format!("cannot read the signing key file {}", path.display())
-                })?;
-                config.signing = Some(SigningKey::from_hex(&text).map_err(anyhow::Error::msg)?);
+            if let Some(key) = &args.signing_key {
+                config.signing = Some(KeyStore::user()?.load(key)?);
             }
             let link = MavlinkLink::connect(&address, config)?;
             if let Some(path) = &args.tlog {

@@ -65,6 +65,7 @@ fn real_time_factor(world: &Arc<World>, n: usize, sim_seconds: f64) {
             .collect(),
         camera: None,
         speed: f64::INFINITY,
+        signing_key: None,
     })
     .expect("start the simulator");
     let frames = sitl.subscribe();

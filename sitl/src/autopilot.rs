@@ -7,7 +7,11 @@
 //! idle radio — sticks centred, throttle low — flies it, so it sinks and lands); the GCS failsafe
 //! (no GCS heartbeat for `FS_GCS_TIMEOUT`, 5 s, while flying → LAND); the battery failsafe;
 //! auto-disarm after landing; `SET_MESSAGE_INTERVAL`, `REQUEST_DATA_STREAM`, `REQUEST_MESSAGE`;
-//! parameters; and the telemetry a station reads, in NED.
+//! parameters; the telemetry a station reads, in NED; and MAVLink 2 signing as ArduPilot does it:
+//! with a key set (at start, or by `SETUP_SIGNING`), every frame without a valid signature — none,
+//! a wrong key, or a timestamp already seen (a replay) — is dropped, and every frame sent is
+//! signed. `SETUP_SIGNING` is taken unsigned only while no key is set (ArduPilot takes it on USB);
+//! an all-zero key turns signing off.
 //!
 //! The state machine is pure: [`Autopilot::handle`] takes received frames, [`Autopilot::update`]
 //! runs it at the simulator's rate, and the bytes to send are taken with
@@ -20,7 +24,7 @@ use link::mavlink::frame::{RawFrame, encode};
 use link::mavlink::modes::copter_custom_mode;
 use link::{ChannelMap, FlightMode, Pulses};
 use mavlink::dialects::ardupilotmega::*;
-use mavlink::{MavHeader, MavlinkVersion};
+use mavlink::{MavHeader, MavlinkVersion, SigningConfig, SigningData};
 
 use crate::sensors::Readings;
 use crate::vehicle::{Vehicle, VehicleEvent};
@@ -34,6 +38,8 @@ pub struct AutopilotConfig {
     pub home: [f64; 3],
     /// Telemetry rate of every stream until a station asks otherwise, Hz.
     pub default_rate_hz: f64,
+    /// The MAVLink 2 signing key at power-up (`None`: signing off until `SETUP_SIGNING`).
+    pub signing_key: Option<[u8; 32]>,
 }
 
 impl Default for AutopilotConfig {
@@ -43,6 +49,7 @@ impl Default for AutopilotConfig {
             // ArduPilot SITL's default home (CMAC, Canberra).
             home: [-35.363_261, 149.165_230, 584.0],
             default_rate_hz: 4.0,
+            signing_key: None,
         }
     }
 }
@@ -93,6 +100,38 @@ pub struct Autopilot {
     landed_low_since: Option<Duration>,
     requested_once: Vec<u32>,
     now: Duration,
+    signing: Signing,
+}
+
+/// The autopilot's signing state.
+#[derive(Default)]
+struct Signing {
+    data: Option<SigningData>,
+    /// Frames dropped for a missing, wrong or replayed signature.
+    rejected: u64,
+}
+
+impl Signing {
+    fn with_key(key: Option<[u8; 32]>) -> Self {
+        let mut s = Self::default();
+        s.set_key(key.unwrap_or([0; 32]));
+        s
+    }
+
+    /// Sets the key; all zeros turns signing off (as ArduPilot).
+    fn set_key(&mut self, key: [u8; 32]) {
+        self.data = (key != [0; 32])
+            .then(|| SigningData::from_config(SigningConfig::new(key, 0, true, false)));
+    }
+}
+
+impl std::fmt::Debug for Signing {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Signing")
+            .field("on", &self.data.is_some())
+            .field("rejected", &self.rejected)
+            .finish()
+    }
 }
 
 /// Largest backlog of bytes kept for a station that is not reading, bytes.
@@ -101,6 +140,7 @@ const MAX_BACKLOG: usize = 256 * 1024;
 impl Autopilot {
     /// A powered-up autopilot: disarmed, in STABILIZE.
     pub fn new(config: AutopilotConfig) -> Self {
+        let signing = Signing::with_key(config.signing_key);
         let mut params: Vec<(&'static str, f32)> = PARAMS.to_vec();
         params[0].1 = f32::from(config.system_id);
         let period = Duration::from_secs_f64(1.0 / config.default_rate_hz.clamp(0.1, 50.0));
@@ -121,12 +161,23 @@ impl Autopilot {
             landed_low_since: None,
             requested_once: vec![],
             now: Duration::ZERO,
+            signing,
         }
     }
 
     /// The system id.
     pub fn system_id(&self) -> u8 {
         self.config.system_id
+    }
+
+    /// Whether frames must be signed.
+    pub fn signing(&self) -> bool {
+        self.signing.data.is_some()
+    }
+
+    /// Frames dropped for a missing, wrong or replayed signature.
+    pub fn rejected_signatures(&self) -> u64 {
+        self.signing.rejected
     }
 
     /// The bytes to send to the station since the last call.
@@ -162,7 +213,12 @@ impl Autopilot {
         if self.out.len() > MAX_BACKLOG {
             self.out.clear(); // nobody is reading: old telemetry is worthless
         }
-        self.out.extend(encode(self.version, header, &msg, None));
+        self.out.extend(encode(
+            self.version,
+            header,
+            &msg,
+            self.signing.data.as_ref(),
+        ));
     }
 
     fn text(&mut self, severity: MavSeverity, text: &str) {
@@ -193,6 +249,12 @@ impl Autopilot {
     #[allow(deprecated)]
     pub fn handle(&mut self, now: Duration, frame: &RawFrame, vehicle: &mut Vehicle) {
         self.now = now;
+        if let Some(signing) = &self.signing.data
+            && !frame.verify(signing)
+        {
+            self.signing.rejected += 1;
+            return;
+        }
         let Ok(msg) = frame.decode() else {
             return; // a message of another dialect: not for us
         };
@@ -234,6 +296,16 @@ impl Autopilot {
             }
             MavMessage::RC_CHANNELS_OVERRIDE(o) if self.for_me(o.target_system) => {
                 self.rc_override(&o);
+            }
+            MavMessage::SETUP_SIGNING(k) if self.for_me(k.target_system) => {
+                // Signed with the current key if one is set: checked above.
+                self.signing.set_key(k.secret_key);
+                if self.signing.data.is_some() {
+                    self.version = MavlinkVersion::V2; // signatures exist in MAVLink 2 only
+                    self.text(MavSeverity::MAV_SEVERITY_NOTICE, "Signing key set");
+                } else {
+                    self.text(MavSeverity::MAV_SEVERITY_WARNING, "Signing disabled");
+                }
             }
             MavMessage::PARAM_REQUEST_LIST(p) if self.for_me(p.target_system) => {
                 for i in 0..self.params.len() {
@@ -775,6 +847,12 @@ mod tests {
         world: World,
         now: Duration,
         received: Vec<MavMessage>,
+        /// Signs what the bench sends, when set.
+        signer: Option<SigningData>,
+    }
+
+    fn signer(key: [u8; 32]) -> SigningData {
+        SigningData::from_config(SigningConfig::new(key, 0, true, false))
     }
 
     impl Bench {
@@ -787,12 +865,17 @@ mod tests {
                 world,
                 now: Duration::ZERO,
                 received: vec![],
+                signer: None,
             }
         }
 
         fn send(&mut self, msg: MavMessage) {
-            let bytes = encode(MavlinkVersion::V2, GCS, &msg, None);
-            let frame = FrameScanner::single(&bytes).unwrap();
+            let bytes = encode(MavlinkVersion::V2, GCS, &msg, self.signer.as_ref());
+            self.send_bytes(&bytes);
+        }
+
+        fn send_bytes(&mut self, bytes: &[u8]) {
+            let frame = FrameScanner::single(bytes).unwrap();
             self.ap.handle(self.now, &frame, &mut self.vehicle);
             self.collect();
         }
@@ -1231,5 +1314,121 @@ mod tests {
         );
         b.run(6.0, None, true);
         assert!((b.z() - 1.2).abs() < 0.05, "{}", b.z());
+    }
+
+    fn arm_message(arm: bool) -> MavMessage {
+        MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+            param1: if arm { 1.0 } else { 0.0 },
+            param2: FORCE_ARM,
+            command: MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            target_system: 1,
+            target_component: 1,
+            ..COMMAND_LONG_DATA::default()
+        })
+    }
+
+    impl Bench {
+        fn armed(&self) -> bool {
+            self.vehicle.state().armed
+        }
+
+        fn acks(&self) -> usize {
+            self.received
+                .iter()
+                .filter(|m| matches!(m, MavMessage::COMMAND_ACK(_)))
+                .count()
+        }
+    }
+
+    #[test]
+    fn with_a_key_only_fresh_frames_signed_with_it_are_obeyed() {
+        let key = [7u8; 32];
+        let mut b = Bench::new();
+        b.ap = Autopilot::new(AutopilotConfig {
+            signing_key: Some(key),
+            ..AutopilotConfig::default()
+        });
+        assert!(b.ap.signing());
+        // Unsigned, MAVLink 1, and signed with another key: dropped without an answer.
+        b.send(arm_message(true));
+        b.send_bytes(&encode(MavlinkVersion::V1, GCS, &arm_message(true), None));
+        b.signer = Some(signer([8; 32]));
+        b.send(arm_message(true));
+        assert!(!b.armed());
+        assert_eq!(b.ap.rejected_signatures(), 3);
+        assert_eq!(b.acks(), 0);
+
+        // The key holder is obeyed, and what the autopilot sends is signed with the key.
+        b.signer = Some(signer(key));
+        b.send(arm_message(true));
+        assert!(b.armed());
+        let mut scanner = FrameScanner::new();
+        b.now += Duration::from_secs(1);
+        let readings = Readings {
+            sonar: Some(0.0),
+            yaw: 0.0,
+            battery_v: 12.6,
+            battery_pct: 100,
+        };
+        b.ap.update(b.now, &mut b.vehicle, &readings, &[]);
+        scanner.push(&b.ap.take_output());
+        let check = signer(key);
+        let mut frames = 0;
+        while let Some(f) = scanner.next_frame() {
+            assert!(
+                f.is_signed() && f.verify(&check),
+                "an unsigned or badly signed frame"
+            );
+            frames += 1;
+        }
+        assert!(frames > 0);
+
+        // A recorded DISARM sent again (a replay) is dropped: its timestamp was seen.
+        let disarm = encode(
+            MavlinkVersion::V2,
+            GCS,
+            &arm_message(false),
+            b.signer.as_ref(),
+        );
+        b.send_bytes(&disarm);
+        assert!(!b.armed());
+        b.send(arm_message(true));
+        assert!(b.armed());
+        b.send_bytes(&disarm);
+        assert!(b.armed(), "a replayed DISARM was obeyed");
+        assert_eq!(b.ap.rejected_signatures(), 4);
+    }
+
+    #[test]
+    fn setup_signing_sets_a_key_once_and_only_its_holder_changes_or_clears_it() {
+        let key = link::mavlink::SigningKey {
+            secret: [5; 32],
+            link_id: 0,
+            allow_unsigned: false,
+        };
+        let mut b = Bench::new();
+        assert!(!b.ap.signing());
+        b.send(link::mavlink::keys::setup_signing(&key, 1));
+        assert!(b.ap.signing());
+        assert!(b.received.iter().any(
+            |m| matches!(m, MavMessage::STATUSTEXT(t) if t.text.to_str().is_ok_and(|t| t.contains("Signing key set")))
+        ));
+        // Someone without the key cannot replace it.
+        let intruder = link::mavlink::SigningKey {
+            secret: [6; 32],
+            ..key.clone()
+        };
+        b.send(link::mavlink::keys::setup_signing(&intruder, 1));
+        b.signer = Some(signer([6; 32]));
+        b.send(arm_message(true));
+        assert!(!b.armed());
+        assert_eq!(b.ap.rejected_signatures(), 2);
+        // The key holder turns signing off; then anyone is obeyed again.
+        b.signer = Some(signer([5; 32]));
+        b.send(link::mavlink::keys::disable_signing(1));
+        assert!(!b.ap.signing());
+        b.signer = None;
+        b.send(arm_message(true));
+        assert!(b.armed());
     }
 }

@@ -68,6 +68,11 @@ struct RunArgs {
     /// Stop after this many simulated seconds (default: run until interrupted).
     #[arg(long)]
     duration: Option<f64>,
+    /// MAVLink vehicles sign from power-up with this key (a file of 64 hexadecimal digits that
+    /// only its owner may read, e.g. one made by `gcs key new`); without it they sign once a
+    /// station sends SETUP_SIGNING (`gcs key setup`).
+    #[arg(long, value_name = "FILE")]
+    signing_key: Option<PathBuf>,
 }
 
 #[derive(clap::Args)]
@@ -168,6 +173,10 @@ fn run(args: RunArgs) -> anyhow::Result<()> {
     {
         bail!("--duration {d} must be a positive number of seconds");
     }
+    let signing_key = match &args.signing_key {
+        Some(path) => Some(link::mavlink::keys::read_key_file(path)?.secret),
+        None => None,
+    };
     let (w, h) = args.camera_size;
     let config = SitlConfig {
         world: world.clone(),
@@ -181,6 +190,7 @@ fn run(args: RunArgs) -> anyhow::Result<()> {
         vehicles: args.vehicles.clone(),
         camera: args.camera.clone(),
         speed: args.speed,
+        signing_key,
     };
     let sitl = Sitl::start(config).context("cannot start the simulator")?;
     let mut out = std::io::stdout().lock();

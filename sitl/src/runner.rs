@@ -83,6 +83,9 @@ pub struct SitlConfig {
     pub camera: Option<Address>,
     /// Simulated seconds per real second; `f64::INFINITY` runs as fast as the machine can.
     pub speed: f64,
+    /// The MAVLink vehicles' signing key at power-up (`None`: off until a station sends
+    /// `SETUP_SIGNING`).
+    pub signing_key: Option<[u8; 32]>,
 }
 
 /// The simulator could not start.
@@ -171,6 +174,7 @@ impl Sitl {
                         transport,
                         AutopilotConfig {
                             system_id: (k + 1) as u8,
+                            signing_key: config.signing_key,
                             ..AutopilotConfig::default()
                         },
                         shared.clone(),
@@ -732,6 +736,7 @@ mod tests {
             vehicles: vec!["mavlink@udpin:127.0.0.1:0".parse().unwrap(); 2],
             camera: None,
             speed: 20.0,
+            signing_key: None,
         })
         .unwrap();
         let frames = sitl.subscribe();
@@ -763,6 +768,7 @@ mod tests {
             ],
             camera: None,
             speed: 1.0,
+            signing_key: None,
         })
         .err()
         .unwrap();

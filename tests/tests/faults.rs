@@ -161,6 +161,7 @@ fn copter(address: &str) -> Sitl {
         vehicles: vec![format!("mavlink@{address}").parse().expect("endpoint")],
         camera: None,
         speed: 1.0,
+        signing_key: None,
     })
     .expect("the simulator starts")
 }

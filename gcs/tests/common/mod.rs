@@ -36,6 +36,7 @@ pub fn serve_fleet(dir: &Path, protocols: &[Protocol]) -> (Sitl, PathBuf) {
             .collect(),
         camera: Some("tcpin:127.0.0.1:0".parse().expect("address")),
         speed: 1.0,
+        signing_key: None,
     })
     .expect("the simulator starts");
     let camera = sitl.camera_addr().expect("a camera stream").port();
