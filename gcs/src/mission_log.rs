@@ -47,7 +47,7 @@ pub fn read(bytes: &[u8], origin: &str) -> anyhow::Result<MissionLog> {
     if !bytes.starts_with(mcap::MAGIC) {
         bail!(not_mcap());
     }
-    let stream = mcap::MessageStream::new(bytes).with_context(not_mcap)?;
+    let stream = messages(bytes);
     let mut setup = None;
     let mut states: BTreeMap<usize, Vec<DroneState>> = BTreeMap::new();
     let mut grid = None;
@@ -68,7 +68,7 @@ pub fn read(bytes: &[u8], origin: &str) -> anyhow::Result<MissionLog> {
             }
         };
         messages += 1;
-        let topic = m.channel.topic.as_str();
+        let topic = m.topic.as_str();
         let drone = drone_of(topic);
         match (topic, drone) {
             ("/setup", _) => {
@@ -229,6 +229,195 @@ fn grid_of(g: &FoxGrid) -> Option<Grid> {
     Some(grid)
 }
 
+/// The largest record the reader takes (compressed or not). A mission log's largest records are
+/// its chunks (about a megabyte); a record that claims more is a corrupt or hostile file.
+const MAX_RECORD_BYTES: usize = 64 << 20;
+
+/// One message of a log: its topic, log time and bytes.
+#[derive(Debug)]
+struct Message {
+    topic: String,
+    log_time: u64,
+    data: Vec<u8>,
+}
+
+/// The messages of an MCAP file in log order, read with bounded memory and without trusting any
+/// length in the file: records larger than [`MAX_RECORD_BYTES`] are refused, chunks are
+/// decompressed here into at most that much, and the only records parsed — channels and
+/// messages — are parsed with every length checked against the record. (The `mcap` crate's own
+/// record parser trusts string lengths — a 94-byte file made it reserve 3.8 GB — and its reader
+/// of uncompressed chunks overflows on a record longer than its chunk: both found by fuzzing.
+/// Only its framing of top-level records is used.)
+fn messages(bytes: &[u8]) -> impl Iterator<Item = anyhow::Result<Message>> + '_ {
+    use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
+    let mut reader = LinearReader::new_with_options(
+        LinearReaderOptions::default()
+            .with_record_length_limit(MAX_RECORD_BYTES)
+            .with_emit_chunks(true),
+    );
+    let mut rest = bytes;
+    let mut topics: BTreeMap<u16, String> = BTreeMap::new();
+    let mut pending: std::collections::VecDeque<Message> = std::collections::VecDeque::new();
+    let mut failed = false;
+    let mut next = move || -> Option<anyhow::Result<Message>> {
+        loop {
+            if let Some(m) = pending.pop_front() {
+                return Some(Ok(m));
+            }
+            let event = match reader.next_event()? {
+                Ok(e) => e,
+                Err(e) => return Some(Err(anyhow::anyhow!("{e}"))),
+            };
+            match event {
+                LinearReadEvent::ReadRequest(need) => {
+                    let n = need.min(rest.len());
+                    reader.insert(n).copy_from_slice(&rest[..n]);
+                    reader.notify_read(n);
+                    rest = &rest[n..];
+                }
+                LinearReadEvent::Record { opcode, data } => {
+                    let done = if opcode == mcap::records::op::CHUNK {
+                        chunk_records(data).and_then(|records| {
+                            let mut records = &records[..];
+                            while !records.is_empty() {
+                                let (op, body) = record(&mut records).ok_or_else(|| {
+                                    anyhow::anyhow!("a malformed record in a chunk")
+                                })?;
+                                take_record(op, body, &mut topics, &mut pending)?;
+                            }
+                            Ok(())
+                        })
+                    } else {
+                        take_record(opcode, data, &mut topics, &mut pending)
+                    };
+                    if let Err(e) = done {
+                        return Some(Err(e));
+                    }
+                }
+            }
+        }
+    };
+    // The first error ends the stream.
+    std::iter::from_fn(move || {
+        if failed {
+            return None;
+        }
+        let item = next();
+        failed = matches!(item, Some(Err(_)));
+        item
+    })
+}
+
+/// Keeps what a record says that the reader needs: a channel's topic, or a message.
+fn take_record(
+    opcode: u8,
+    body: &[u8],
+    topics: &mut BTreeMap<u16, String>,
+    out: &mut std::collections::VecDeque<Message>,
+) -> anyhow::Result<()> {
+    match opcode {
+        mcap::records::op::CHANNEL => {
+            let (id, topic) =
+                channel_topic(body).ok_or_else(|| anyhow::anyhow!("a malformed channel record"))?;
+            topics.insert(id, topic);
+        }
+        mcap::records::op::MESSAGE => {
+            let (channel, log_time, payload) =
+                message_parts(body).ok_or_else(|| anyhow::anyhow!("a malformed message record"))?;
+            let topic = topics.get(&channel).ok_or_else(|| {
+                anyhow::anyhow!("a message on channel {channel}, which was never declared")
+            })?;
+            out.push_back(Message {
+                topic: topic.clone(),
+                log_time,
+                data: payload.to_vec(),
+            });
+        }
+        _ => {}
+    }
+    Ok(())
+}
+
+/// One record (opcode u8, length u64, body) from the front of `bytes`.
+fn record<'a>(bytes: &mut &'a [u8]) -> Option<(u8, &'a [u8])> {
+    let opcode = *take(bytes, 1)?.first()?;
+    let len = usize::try_from(take_u64(bytes)?).ok()?;
+    Some((opcode, take(bytes, len)?))
+}
+
+/// A chunk's records, decompressed (MCAP: start and end time u64, uncompressed size u64, CRC u32,
+/// compression as u32 length + text, records as u64 length + bytes).
+fn chunk_records(mut chunk: &[u8]) -> anyhow::Result<std::borrow::Cow<'_, [u8]>> {
+    let malformed = || anyhow::anyhow!("a malformed chunk");
+    take(&mut chunk, 16).ok_or_else(malformed)?;
+    let size = take_u64(&mut chunk).ok_or_else(malformed)?;
+    take(&mut chunk, 4).ok_or_else(malformed)?;
+    let name_len = take(&mut chunk, 4)
+        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .ok_or_else(malformed)?;
+    let compression = take(&mut chunk, usize::try_from(name_len)?).ok_or_else(malformed)?;
+    let len = usize::try_from(take_u64(&mut chunk).ok_or_else(malformed)?)?;
+    let records = take(&mut chunk, len).ok_or_else(malformed)?;
+    let size = usize::try_from(size)?;
+    if size > MAX_RECORD_BYTES {
+        bail!("a chunk of {size} bytes uncompressed (at most {MAX_RECORD_BYTES})");
+    }
+    match compression {
+        b"" => Ok(std::borrow::Cow::Borrowed(records)),
+        b"zstd" => {
+            let out = zstd::bulk::decompress(records, size)
+                .map_err(|e| anyhow::anyhow!("a chunk that does not decompress: {e}"))?;
+            if out.len() != size {
+                bail!("a chunk of {} bytes where {size} were declared", out.len());
+            }
+            Ok(std::borrow::Cow::Owned(out))
+        }
+        other => bail!(
+            "chunks compressed with {:?} (mission logs use zstd)",
+            String::from_utf8_lossy(other)
+        ),
+    }
+}
+
+/// Takes `n` bytes from the front of `bytes`.
+fn take<'a>(bytes: &mut &'a [u8], n: usize) -> Option<&'a [u8]> {
+    if bytes.len() < n {
+        return None;
+    }
+    let (head, tail) = bytes.split_at(n);
+    *bytes = tail;
+    Some(head)
+}
+
+fn take_u16(bytes: &mut &[u8]) -> Option<u16> {
+    take(bytes, 2).map(|b| u16::from_le_bytes([b[0], b[1]]))
+}
+
+fn take_u64(bytes: &mut &[u8]) -> Option<u64> {
+    take(bytes, 8)
+        .and_then(|b| b.try_into().ok())
+        .map(u64::from_le_bytes)
+}
+
+/// A channel record's id and topic (MCAP: id u16, schema id u16, topic as u32 length + UTF-8).
+fn channel_topic(mut record: &[u8]) -> Option<(u16, String)> {
+    let id = take_u16(&mut record)?;
+    take_u16(&mut record)?;
+    let len = take(&mut record, 4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))?;
+    let topic = take(&mut record, usize::try_from(len).ok()?)?;
+    Some((id, String::from_utf8(topic.to_vec()).ok()?))
+}
+
+/// A message record's channel, log time and payload (MCAP: channel u16, sequence u32, log time
+/// u64, publish time u64, payload).
+fn message_parts(mut record: &[u8]) -> Option<(u16, u64, &[u8])> {
+    let channel = take_u16(&mut record)?;
+    take(&mut record, 4)?;
+    let log_time = take_u64(&mut record)?;
+    take_u64(&mut record)?;
+    Some((channel, log_time, record))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -247,5 +436,102 @@ mod tests {
         assert!(e.contains("x.mcap is not an MCAP file"), "{e}");
         let e = format!("{:#}", read(mcap::MAGIC, "y.mcap").expect_err("no setup"));
         assert!(e.contains("y.mcap"), "{e}");
+    }
+
+    /// An MCAP file with `n` messages on "/a", in zstd chunks.
+    fn small_log(n: u64) -> Vec<u8> {
+        let mut out = std::io::Cursor::new(vec![]);
+        {
+            let mut w = mcap::WriteOptions::new()
+                .compression(Some(mcap::Compression::Zstd))
+                .chunk_size(Some(256))
+                .create(&mut out)
+                .expect("writer");
+            let channel = w
+                .add_channel(0, "/a", "json", &BTreeMap::new())
+                .expect("channel");
+            for i in 0..n {
+                let header = mcap::records::MessageHeader {
+                    channel_id: channel,
+                    sequence: i as u32,
+                    log_time: 1000 + i,
+                    publish_time: 1000 + i,
+                };
+                w.write_to_known_channel(&header, format!("{{\"i\":{i}}}").as_bytes())
+                    .expect("message");
+            }
+            w.finish().expect("finish");
+        }
+        out.into_inner()
+    }
+
+    #[test]
+    fn messages_read_back_in_order_and_a_cut_log_up_to_its_last_whole_chunk() {
+        let log = small_log(40);
+        let all: Vec<Message> = messages(&log).map(|m| m.expect("readable")).collect();
+        assert_eq!(all.len(), 40);
+        for (i, m) in all.iter().enumerate() {
+            assert_eq!(m.topic, "/a");
+            assert_eq!(m.log_time, 1000 + i as u64);
+            assert_eq!(m.data, format!("{{\"i\":{i}}}").as_bytes());
+        }
+        let cut = &log[..log.len() / 2];
+        let read: Vec<_> = messages(cut).collect();
+        let whole = read.iter().take_while(|m| m.is_ok()).count();
+        assert!(whole > 0 && whole < 40, "{whole}");
+        assert!(
+            read.last().is_some_and(Result::is_err),
+            "the cut must be reported"
+        );
+    }
+
+    #[test]
+    fn the_fuzzers_findings_are_clean_errors() {
+        for (name, bytes) in [
+            (
+                "4 GB header string (out of memory in mcap 0.26)",
+                &include_bytes!("../tests/fixtures/fuzz-mission-log-4gb-string.mcap")[..],
+            ),
+            (
+                "record longer than its uncompressed chunk (overflow panic in mcap 0.26)",
+                &include_bytes!("../tests/fixtures/fuzz-mission-log-chunk-overflow.mcap")[..],
+            ),
+        ] {
+            assert!(read(bytes, name).is_err(), "{name}");
+        }
+    }
+
+    #[test]
+    fn lying_lengths_are_errors_not_allocations() {
+        // A channel record whose topic claims 4 GB (the fuzzer's finding was the same lie in a
+        // header's profile string, which this reader never parses).
+        let mut log = mcap::MAGIC.to_vec();
+        let body = [
+            &1u16.to_le_bytes()[..],
+            &0u16.to_le_bytes(),
+            &0xF000_0000u32.to_le_bytes(),
+            b"/a",
+        ]
+        .concat();
+        log.push(mcap::records::op::CHANNEL);
+        log.extend((body.len() as u64).to_le_bytes());
+        log.extend(&body);
+        let e = messages(&log)
+            .next()
+            .expect("an item")
+            .expect_err("refused");
+        assert!(e.to_string().contains("malformed channel"), "{e}");
+        // The fuzzer's file: a header whose profile string claims 4 GB.
+        let mut log = mcap::MAGIC.to_vec();
+        let body = [&0xF000_0000u32.to_le_bytes()[..], b"x"].concat();
+        log.push(mcap::records::op::HEADER);
+        log.extend((body.len() as u64).to_le_bytes());
+        log.extend(&body);
+        assert!(read(&log, "evil.mcap").is_err());
+        // A record claiming 1 TB.
+        let mut log = mcap::MAGIC.to_vec();
+        log.push(mcap::records::op::CHUNK);
+        log.extend((1u64 << 40).to_le_bytes());
+        assert!(messages(&log).any(|m| m.is_err()));
     }
 }

@@ -58,3 +58,41 @@ pub fn serve_fleet(dir: &Path, protocols: &[Protocol]) -> (Sitl, PathBuf) {
     std::fs::write(&fleet, text).expect("fleet file");
     (sitl, fleet)
 }
+
+/// The local addresses process `pid` accepts connections or datagrams on: its listening TCP
+/// sockets and its bound UDP sockets, as `(protocol, hex address)` from `/proc` (Linux).
+pub fn open_ports(pid: u32) -> Vec<(String, String)> {
+    let inodes: std::collections::HashSet<String> = std::fs::read_dir(format!("/proc/{pid}/fd"))
+        .expect("the process's file descriptors")
+        .filter_map(|e| std::fs::read_link(e.ok()?.path()).ok())
+        .filter_map(|target| {
+            let t = target.to_string_lossy().into_owned();
+            Some(t.strip_prefix("socket:[")?.strip_suffix(']')?.to_owned())
+        })
+        .collect();
+    let mut open = vec![];
+    for proto in ["tcp", "tcp6", "udp", "udp6"] {
+        let table = std::fs::read_to_string(format!("/proc/{pid}/net/{proto}")).unwrap_or_default();
+        for line in table.lines().skip(1) {
+            let f: Vec<&str> = line.split_whitespace().collect();
+            let (Some(local), Some(state), Some(inode)) = (f.get(1), f.get(3), f.get(9)) else {
+                continue;
+            };
+            let accepts = proto.starts_with("udp") || *state == "0A"; // 0A: LISTEN
+            if accepts && inodes.contains(*inode) {
+                open.push((proto.to_owned(), (*local).to_owned()));
+            }
+        }
+    }
+    open
+}
+
+/// Whether a `/proc/net` hex address is on the loopback interface (127.0.0.0/8 or ::1).
+pub fn is_loopback(hex_address: &str) -> bool {
+    let host = hex_address.split(':').next().unwrap_or("");
+    match host.len() {
+        8 => host.ends_with("7F"),
+        32 => host == "00000000000000000000000001000000",
+        _ => false,
+    }
+}
