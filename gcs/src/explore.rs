@@ -74,9 +74,14 @@ pub struct ExploreArgs {
     #[arg(long)]
     pub no_log: bool,
     /// Kill drone K's link (1-based) at simulated time T seconds: `K@T` (a fault for tests and
-    /// demonstrations; the others must finish the map).
+    /// demonstrations; the others must finish the map). The same as `--fault link:K@T`.
     #[arg(long, value_name = "K@T")]
     pub kill_link: Option<String>,
+    /// Inject a fault into drone K (1-based) at mission time T seconds: `KIND:K@T`, KIND one of
+    /// `link` (its radio dies), `camera` (its camera stops sending), `battery` (its battery
+    /// drops to 20 %). Repeat for more. For tests and demonstrations.
+    #[arg(long = "fault", value_name = "KIND:K@T")]
+    pub faults: Vec<String>,
     /// Write every drone's true and flown pose, SLAM state and σ at 10 Hz to this CSV file
     /// (to see where and why a drone flew off its true pose).
     #[arg(long, value_name = "FILE.csv")]
@@ -190,7 +195,8 @@ pub struct DroneSummary {
     pub final_phase: &'static str,
 }
 
-fn validate(args: &ExploreArgs) -> anyhow::Result<Option<(usize, f64)>> {
+/// Checks the arguments and returns the faults to inject.
+fn validate(args: &ExploreArgs) -> anyhow::Result<Vec<Fault>> {
     args.window.validate()?;
     if !(1..=8).contains(&args.sim.drones) {
         bail!("--drones {} must be 1 to 8", args.sim.drones);
@@ -207,23 +213,86 @@ fn validate(args: &ExploreArgs) -> anyhow::Result<Option<(usize, f64)>> {
             args.timeout
         );
     }
-    let kill = match &args.kill_link {
-        None => None,
-        Some(s) => {
-            let parsed = s.split_once('@').and_then(|(k, t)| {
-                let k: usize = k.trim().parse().ok()?;
-                let t: f64 = t.trim().parse().ok()?;
-                (k >= 1 && k <= args.sim.drones && t.is_finite() && t >= 0.0).then_some((k - 1, t))
-            });
-            Some(parsed.ok_or_else(|| {
-                anyhow::anyhow!(
-                    "--kill-link {s:?}: expected K@T with K a drone 1 to {} and T simulated seconds, e.g. 2@60",
-                    args.sim.drones
-                )
-            })?)
-        }
+    let drones = args.sim.drones;
+    let drone_at = |spec: &str| {
+        spec.split_once('@').and_then(|(k, t)| {
+            let k: usize = k.trim().parse().ok()?;
+            let t: f64 = t.trim().parse().ok()?;
+            (k >= 1 && k <= drones && t.is_finite() && t >= 0.0).then_some((k - 1, t))
+        })
     };
-    Ok(kill)
+    let mut faults = vec![];
+    if let Some(s) = &args.kill_link {
+        let (drone, at) = drone_at(s).ok_or_else(|| {
+            anyhow::anyhow!(
+                "--kill-link {s:?}: expected K@T with K a drone 1 to {drones} and T simulated seconds, e.g. 2@60"
+            )
+        })?;
+        faults.push(Fault {
+            kind: FaultKind::Link,
+            drone,
+            at,
+        });
+    }
+    for s in &args.faults {
+        let parsed = s.split_once(':').and_then(|(kind, rest)| {
+            let kind = match kind {
+                "link" => FaultKind::Link,
+                "camera" => FaultKind::Camera,
+                "battery" => FaultKind::Battery,
+                _ => return None,
+            };
+            let (drone, at) = drone_at(rest)?;
+            Some(Fault { kind, drone, at })
+        });
+        faults.push(parsed.ok_or_else(|| {
+            anyhow::anyhow!(
+                "--fault {s:?}: expected KIND:K@T with KIND link, camera or battery, K a drone 1 to {drones} and T simulated seconds, e.g. camera:2@60"
+            )
+        })?);
+    }
+    Ok(faults)
+}
+
+/// A fault injected into the simulation (`--fault`, `--kill-link`).
+#[derive(Debug, Clone, Copy)]
+pub struct Fault {
+    kind: FaultKind,
+    drone: usize,
+    at: f64,
+}
+
+/// What fails.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum FaultKind {
+    /// The radio link dies (the vehicle's failsafe must land it).
+    Link,
+    /// The camera stops sending.
+    Camera,
+    /// The battery drops to 20 %.
+    Battery,
+}
+
+impl Fault {
+    fn inject(&self, sitl: &sitl::Sitl, elapsed: f64) {
+        let (k, name) = (self.drone, self.drone + 1);
+        match self.kind {
+            FaultKind::Link => {
+                eprintln!("explore: killing drone {name}'s link at {elapsed:.0} s (--kill-link)");
+                sitl.kill_endpoint(k);
+            }
+            FaultKind::Camera => {
+                eprintln!("explore: killing drone {name}'s camera at {elapsed:.0} s (--fault)");
+                sitl.kill_camera(k);
+            }
+            FaultKind::Battery => {
+                eprintln!(
+                    "explore: draining drone {name}'s battery to 20 % at {elapsed:.0} s (--fault)"
+                );
+                sitl.with_sim(|sim| sim.vehicle_mut(k).drain_battery(0.2));
+            }
+        }
+    }
 }
 
 /// Runs `gcs explore`.
@@ -238,7 +307,7 @@ pub fn run(args: &ExploreArgs) -> anyhow::Result<()> {
 
 /// Runs the exploration, in a window if one is given (`gcs explore --gui`, `gcs gui`).
 pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()> {
-    let kill = validate(args)?;
+    let faults = validate(args)?;
     let waits = window.as_ref().is_some_and(|w| w.wait_for_start);
     let session = window.as_ref().is_some_and(|w| w.close_ends_session);
     let world = Arc::new(World::load(&args.sim.world)?);
@@ -309,7 +378,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
         recorder,
     )?;
     let Some(window) = window else {
-        return watch(args, &world, sitl, runtime, clock, kill);
+        return watch(args, &world, sitl, runtime, clock, &faults);
     };
     let station = Station::of(
         &runtime,
@@ -326,7 +395,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
     let commander = runtime.commander();
     let (args, world) = (args.clone(), world.clone());
     beside_window(station, window, commander, move || {
-        watch(&args, &world, sitl, runtime, clock, kill)
+        watch(&args, &world, sitl, runtime, clock, &faults)
     })
 }
 
@@ -338,7 +407,7 @@ fn watch(
     sitl: sitl::Sitl,
     runtime: Runtime,
     clock: Arc<dyn gcs::clock::Clock>,
-    kill: Option<(usize, f64)>,
+    faults: &[Fault],
 ) -> anyhow::Result<()> {
     let reachable = reachable_free(world);
     let wall = Instant::now();
@@ -348,7 +417,7 @@ fn watch(
     let mut flight_error = vec![(0.0f64, 0usize); args.sim.drones];
     let mut next_progress = t0;
     let mut next_truth = t0;
-    let mut killed = false;
+    let mut injected = vec![false; faults.len()];
     let mut trace = match &args.pose_trace {
         Some(path) => {
             let mut f = std::io::BufWriter::new(
@@ -406,17 +475,11 @@ fn watch(
                 }
             }
         }
-        if let Some((k, at)) = kill
-            && !killed
-            && s.state != MissionState::Waiting
-            && elapsed >= at
-        {
-            eprintln!(
-                "explore: killing drone {}'s link at {elapsed:.0} s (--kill-link)",
-                k + 1,
-            );
-            sitl.kill_endpoint(k);
-            killed = true;
+        for (fault, done) in faults.iter().zip(&mut injected) {
+            if !*done && s.state != MissionState::Waiting && elapsed >= fault.at {
+                fault.inject(&sitl, elapsed);
+                *done = true;
+            }
         }
         if now >= next_progress && s.state != MissionState::Waiting {
             next_progress = now + 5.0;

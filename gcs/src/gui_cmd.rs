@@ -119,6 +119,7 @@ pub fn run(args: &GuiArgs) -> anyhow::Result<()> {
                 json: false,
                 no_log: args.no_log,
                 kill_link: None,
+                faults: vec![],
                 pose_trace: None,
                 gui: true,
                 window: args.window.clone(),

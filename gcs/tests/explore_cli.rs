@@ -249,6 +249,45 @@ fn a_drone_whose_link_dies_is_landed_by_its_failsafe_and_the_other_finishes_the_
 }
 
 #[test]
+fn a_drone_whose_camera_dies_and_one_whose_battery_runs_low_go_home_and_the_third_finishes() {
+    let (summary, stderr, out) = explore(
+        "faults",
+        &[
+            "--drones",
+            "3",
+            "--speed",
+            "5",
+            "--timeout",
+            "500",
+            "--poses",
+            "truth",
+            "--fault",
+            "camera:2@40",
+            "--fault",
+            "battery:3@40",
+            "--no-log",
+        ],
+    );
+    assert!(stderr.contains("killing drone 2's camera"), "{stderr}");
+    assert!(
+        stderr.contains("drone 2: no camera frame for 5 s: returning to its start"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("drone 3: battery at 20 %: returning to its start"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("drone 3: home: landing"), "{stderr}");
+    assert_eq!(summary["completed"], true, "{summary}");
+    assert!(number(&summary["coverage"]) >= 0.95, "{summary}");
+    assert_eq!(summary["all_landed"], true, "{summary}");
+    for d in summary["drones"].as_array().expect("drones") {
+        assert_eq!(d["final_phase"], "landed", "{d}");
+    }
+    std::fs::remove_dir_all(&out).ok();
+}
+
+#[test]
 fn bad_explore_arguments_are_refused_before_anything_starts() {
     for (args, expected) in [
         (vec!["explore", "--drones", "9"], "must be 1 to 8"),
@@ -263,6 +302,14 @@ fn bad_explore_arguments_are_refused_before_anything_starts() {
             "no world 'atlantis'",
         ),
         (vec!["explore", "--kill-link", "3@10"], "expected K@T"),
+        (
+            vec!["explore", "--fault", "smoke:1@10"],
+            "expected KIND:K@T with KIND link, camera or battery",
+        ),
+        (
+            vec!["explore", "--fault", "camera:1@-3"],
+            "expected KIND:K@T",
+        ),
     ] {
         let run = gcs(&args);
         assert!(!run.status.success(), "{args:?}");

@@ -120,6 +120,8 @@ struct Shared {
     subscribers: Mutex<Vec<(SyncSender<Arc<CameraFrame>>, bool)>>,
     /// Endpoints whose link is to die at the next tick.
     cut: Mutex<Vec<usize>>,
+    /// Vehicles whose camera has failed (their frames are no longer sent).
+    dead_cameras: Mutex<Vec<u8>>,
 }
 
 /// A running simulator. Dropping it stops every thread and closes every endpoint.
@@ -153,6 +155,7 @@ impl Sitl {
             time_us: AtomicU64::new(0),
             subscribers: Mutex::new(vec![]),
             cut: Mutex::new(vec![]),
+            dead_cameras: Mutex::new(vec![]),
         });
         let mut threads = vec![];
         let mut endpoints: Vec<Box<dyn Endpoint>> = vec![];
@@ -295,6 +298,18 @@ impl Sitl {
             .lock()
             .unwrap_or_else(PoisonError::into_inner)
             .push(k);
+    }
+
+    /// Fails vehicle `k`'s camera: from now on its frames are neither sent to subscribers nor
+    /// streamed, while the vehicle and its link carry on.
+    pub fn kill_camera(&self, k: usize) {
+        if let Ok(k) = u8::try_from(k) {
+            self.shared
+                .dead_cameras
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .push(k);
+        }
     }
 
     /// Runs `f` on the simulation between two physics ticks (ground truth, wind, ...).
@@ -599,7 +614,14 @@ fn physics(shared: &Shared, mut endpoints: Vec<Box<dyn Endpoint>>, speed: f64) {
             (sim.camera_shots(&due), now)
         };
         // Rendered without holding the simulation, so its users (ground truth, wind) never wait.
-        let frames = frames.render();
+        let mut frames = frames.render();
+        {
+            let dead = shared
+                .dead_cameras
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner);
+            frames.retain(|f| !dead.contains(&f.frame.vehicle));
+        }
         shared
             .time_us
             .store(now.as_micros() as u64, Ordering::Relaxed);
@@ -752,6 +774,37 @@ mod tests {
         // 5 frames at 10 Hz is 0.5 s of simulated time; at 20× that takes 25 ms.
         let factor = sitl.time().as_secs_f64() / t0.elapsed().as_secs_f64();
         assert!(factor > 2.0, "ran at {factor:.1}× real time");
+    }
+
+    #[test]
+    fn a_killed_camera_sends_nothing_more_while_the_others_go_on() {
+        let world = Arc::new(World::load(crate::world::DEFAULT_WORLD).unwrap());
+        let sitl = Sitl::start(SitlConfig {
+            world,
+            sim: SimConfig {
+                camera: Some(crate::Camera::kinect(32, 24)),
+                ..SimConfig::default()
+            },
+            vehicles: vec!["mavlink@udpin:127.0.0.1:0".parse().unwrap(); 2],
+            camera: None,
+            speed: 20.0,
+            signing_key: None,
+        })
+        .unwrap();
+        sitl.kill_camera(0);
+        let frames = sitl.subscribe();
+        let mut seen = [0usize; 2];
+        while seen[1] < 20 {
+            let f = frames.recv_timeout(Duration::from_secs(5)).unwrap();
+            seen[usize::from(f.frame.vehicle)] += 1;
+        }
+        assert_eq!(seen[0], 0, "frames from a dead camera");
+        sitl.with_sim(|s| {
+            s.vehicle_mut(1).drain_battery(0.2);
+            assert_eq!(s.vehicle(1).battery_remaining(), 20);
+            s.vehicle_mut(1).drain_battery(0.9); // never recharges
+            assert_eq!(s.vehicle(1).battery_remaining(), 20);
+        });
     }
 
     #[test]

@@ -224,6 +224,13 @@ impl Vehicle {
         ((1.0 - self.state.consumed).clamp(0.0, 1.0) * 100.0).round() as u8
     }
 
+    /// Drains the battery to `remaining` (0–1) at once, if it holds more (a fault for tests: a
+    /// cell failing, a battery that was not charged).
+    pub fn drain_battery(&mut self, remaining: f64) {
+        let consumed = 1.0 - remaining.clamp(0.0, 1.0);
+        self.state.consumed = self.state.consumed.max(consumed);
+    }
+
     /// Takes the events since the last call.
     pub fn take_events(&mut self) -> Vec<VehicleEvent> {
         std::mem::take(&mut self.events)

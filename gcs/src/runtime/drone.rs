@@ -100,6 +100,9 @@ pub struct DroneConfig {
     pub blind_land_s: f64,
     /// Return to the start and land below this battery charge, percent.
     pub low_battery_pct: u8,
+    /// An exploring drone whose camera has sent nothing for this long cannot map: it returns to
+    /// its start and lands, and its goal goes to the others, seconds.
+    pub camera_timeout_s: f64,
     /// A goal reached within this distance, metres (returning home).
     pub home_reach_m: f64,
     /// Send LAND again if the vehicle is still armed this long after it, seconds.
@@ -142,6 +145,7 @@ impl Default for DroneConfig {
             blind_yaw: 0.2,
             blind_land_s: 30.0,
             low_battery_pct: 25,
+            camera_timeout_s: 5.0,
             home_reach_m: 0.3,
             land_retry_s: 20.0,
         }
@@ -190,6 +194,8 @@ pub struct Drone {
     /// The phase the link was lost in.
     lost_in: Option<Phase>,
     blind_since: Option<f64>,
+    /// Mission time of its last camera frame (none yet: no camera is watched).
+    last_frame: Option<f64>,
     /// When the last LAND was sent (mission time), while landing.
     landing_since: Option<f64>,
     last_tick: Option<f64>,
@@ -239,6 +245,7 @@ impl Drone {
             pending: None,
             lost_in: None,
             blind_since: None,
+            last_frame: None,
             landing_since: None,
             last_tick: None,
             sticks: None,
@@ -406,6 +413,11 @@ impl Drone {
         self.sticks = Some(s);
     }
 
+    /// A camera frame of this drone reached the SLAM at mission time `now`.
+    pub fn camera_frame(&mut self, now: f64) {
+        self.last_frame = Some(self.last_frame.map_or(now, |t| t.max(now)));
+    }
+
     /// The filter's pose (x, y, z, yaw) if valid.
     pub fn pose(&self) -> Option<[f64; 4]> {
         self.ekf
@@ -499,6 +511,13 @@ impl Drone {
                 return None;
             }
             Phase::TakingOff | Phase::Exploring | Phase::Holding | Phase::Returning => {}
+        }
+        // A camera gone silent: no more mapping, home.
+        if let Some(last) = self.last_frame
+            && self.phase == Phase::Exploring
+            && now - last > config.camera_timeout_s
+        {
+            self.return_home(&format!("no camera frame for {:.0} s", now - last));
         }
         // Low battery: home.
         if let Some(pct) = telemetry.battery.and_then(|b| b.remaining_pct)
@@ -743,23 +762,98 @@ mod tests {
         }
     }
 
-    #[test]
-    fn land_is_sent_again_while_the_vehicle_stays_armed() {
-        let vehicle = Arc::new(StubbornVehicle::default());
-        let config = DroneConfig::default();
+    fn exploring_drone(vehicle: Arc<StubbornVehicle>, config: &DroneConfig) -> Drone {
         let mut drone = Drone::new(
             0,
             DroneSpec {
                 name: "drone 1".into(),
-                link: vehicle.clone(),
+                link: vehicle,
                 start_sequence: StartSequence::Mavlink,
                 altitude: 0.9,
                 start: Some([0.0, 0.0, 0.0]),
             },
-            &config,
+            config,
             0.0,
         );
         drone.phase = Phase::Exploring;
+        drone
+    }
+
+    #[test]
+    fn a_drone_whose_camera_falls_silent_goes_home() {
+        let config = DroneConfig::default();
+        let mut drone = exploring_drone(Arc::default(), &config);
+        // No camera watched before its first frame.
+        drone.tick(config.camera_timeout_s + 1.0, &config);
+        assert_eq!(drone.phase, Phase::Exploring);
+        let mut t = 10.0;
+        while t < 20.0 {
+            drone.camera_frame(t);
+            drone.tick(t, &config);
+            t += 0.1;
+        }
+        assert_eq!(drone.phase, Phase::Exploring, "frames every 0.1 s");
+        let last = t - 0.1;
+        while t < last + config.camera_timeout_s - 0.2 {
+            drone.tick(t, &config);
+            t += 0.1;
+        }
+        assert_eq!(drone.phase, Phase::Exploring, "not yet");
+        drone.tick(last + config.camera_timeout_s + 0.2, &config);
+        assert_eq!(drone.phase, Phase::Returning);
+        assert_eq!(drone.goal, Some([0.0, 0.0]));
+        assert!(
+            drone
+                .take_messages()
+                .iter()
+                .any(|m| m.contains("no camera frame for 5 s")),
+        );
+    }
+
+    #[test]
+    fn a_drone_without_a_pose_hovers_level_turning_then_lands_where_it_is() {
+        let vehicle = Arc::new(StubbornVehicle::default());
+        let config = DroneConfig::default();
+        let mut drone = exploring_drone(vehicle.clone(), &config);
+        // The start pose holds for a while; without SLAM fixes (tracking lost) it expires.
+        let mut t = 0.0;
+        while drone.pose().is_some() {
+            t += 0.1;
+            drone.tick(t, &config);
+            assert!(t < 20.0, "a pose without any SLAM fix must expire");
+        }
+        let blind = t;
+        while t < blind + config.blind_land_s - 0.5 {
+            t += 0.1;
+            drone.tick(t, &config);
+            let s = drone.sticks.expect("sticks");
+            // Level (no drift from stale tilt), altitude held by the vehicle, a slow turn.
+            assert_eq!((s.roll, s.pitch, s.throttle), (0.0, 0.0, 0.0));
+            assert_eq!(s.yaw, config.blind_yaw);
+            assert_eq!(drone.phase, Phase::Exploring);
+        }
+        drone.tick(blind + config.blind_land_s + 0.5, &config);
+        assert_eq!(drone.phase, Phase::Landing);
+        let waited = std::time::Instant::now();
+        while !vehicle
+            .commands
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .contains(&Command::Land)
+        {
+            assert!(
+                waited.elapsed() < std::time::Duration::from_secs(2),
+                "no LAND sent"
+            );
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+    }
+
+    #[test]
+    fn land_is_sent_again_while_the_vehicle_stays_armed() {
+        let vehicle = Arc::new(StubbornVehicle::default());
+        let config = DroneConfig::default();
+        let mut drone = exploring_drone(vehicle.clone(), &config);
         drone.land();
         let lands = || {
             vehicle

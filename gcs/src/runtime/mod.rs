@@ -405,9 +405,11 @@ impl Mission {
             }
             if let Some(p) = &self.perception {
                 for fix in p.take_fixes() {
-                    if let (Some(d), Some(pose)) =
-                        (self.drones.get_mut(fix.drone), fix.map_from_body)
-                    {
+                    let Some(d) = self.drones.get_mut(fix.drone) else {
+                        continue;
+                    };
+                    d.camera_frame(now);
+                    if let Some(pose) = fix.map_from_body {
                         let v = pose.translation.vector;
                         let x = pose.rotation * nalgebra::Vector3::x();
                         d.ekf
