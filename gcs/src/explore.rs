@@ -193,6 +193,15 @@ pub struct DroneSummary {
     pub collisions: u32,
     /// The phase it ended in.
     pub final_phase: &'static str,
+    /// RC override frames its vehicle received (MAVLink vehicles; `null` over the shield).
+    pub rc_frames: Option<u64>,
+    /// The gap between override frames that 99 % of gaps did not exceed, at the vehicle,
+    /// milliseconds of simulated time (10 ms resolution: the simulator's tick).
+    pub rc_gap_p99_ms: Option<u64>,
+    /// The longest gap between override frames at the vehicle, milliseconds (2000: 2 s or
+    /// more; it includes the time on the ground before take-off and after landing, when the
+    /// station sends none).
+    pub rc_gap_max_ms: Option<u64>,
 }
 
 /// Checks the arguments and returns the faults to inject.
@@ -522,6 +531,7 @@ fn watch(
     while !all_down(&sitl) && clock.now() < down_by {
         std::thread::sleep(Duration::from_millis(20));
     }
+    let rc = sitl.rc_stats();
     let collisions: Vec<u32> = sitl.with_sim(|sim| {
         (0..sim.len())
             .map(|k| sim.vehicle(k).state().collisions)
@@ -572,6 +582,12 @@ fn watch(
                     lost_frames: perception.slam.estimate(k).map_or(0, |e| e.lost_frames),
                     collisions: collisions[k],
                     final_phase: report.drones[k].phase.name(),
+                    rc_frames: rc.get(k).and_then(Option::as_ref).map(|r| r.frames),
+                    rc_gap_p99_ms: rc
+                        .get(k)
+                        .and_then(Option::as_ref)
+                        .and_then(|r| r.quantile_ms(0.99)),
+                    rc_gap_max_ms: rc.get(k).and_then(Option::as_ref).and_then(|r| r.max_ms()),
                 }
             })
             .collect(),

@@ -101,6 +101,48 @@ pub struct Autopilot {
     requested_once: Vec<u32>,
     now: Duration,
     signing: Signing,
+    rc_stats: RcStats,
+    last_rc_frame: Option<Duration>,
+}
+
+/// How regularly RC overrides arrived: a histogram of the gaps between consecutive override
+/// frames, in whole milliseconds of vehicle time (the last bucket holds every gap of 2 s or more).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RcStats {
+    /// Override frames received.
+    pub frames: u64,
+    /// `gaps[ms]`: how many gaps lasted `ms` milliseconds.
+    pub gaps: Vec<u64>,
+}
+
+impl Default for RcStats {
+    fn default() -> Self {
+        Self {
+            frames: 0,
+            gaps: vec![0; 2001],
+        }
+    }
+}
+
+impl RcStats {
+    /// The gap that `q` (0–1) of all gaps do not exceed, milliseconds (`None` before two frames).
+    pub fn quantile_ms(&self, q: f64) -> Option<u64> {
+        let total: u64 = self.gaps.iter().sum();
+        if total == 0 {
+            return None;
+        }
+        let want = (q.clamp(0.0, 1.0) * total as f64).ceil().max(1.0) as u64;
+        let mut seen = 0;
+        self.gaps.iter().enumerate().find_map(|(ms, n)| {
+            seen += n;
+            (seen >= want).then_some(ms as u64)
+        })
+    }
+
+    /// The longest gap, milliseconds (2000 means 2 s or more).
+    pub fn max_ms(&self) -> Option<u64> {
+        self.gaps.iter().rposition(|n| *n > 0).map(|ms| ms as u64)
+    }
 }
 
 /// The autopilot's signing state.
@@ -162,7 +204,14 @@ impl Autopilot {
             requested_once: vec![],
             now: Duration::ZERO,
             signing,
+            rc_stats: RcStats::default(),
+            last_rc_frame: None,
         }
+    }
+
+    /// How regularly RC overrides have arrived so far.
+    pub fn rc_stats(&self) -> &RcStats {
+        &self.rc_stats
     }
 
     /// The system id.
@@ -380,6 +429,12 @@ impl Autopilot {
             }
         }
         self.last_override = Some(self.now);
+        if let Some(last) = self.last_rc_frame {
+            let ms = self.now.saturating_sub(last).as_millis().min(2000) as usize;
+            self.rc_stats.gaps[ms] += 1;
+        }
+        self.last_rc_frame = Some(self.now);
+        self.rc_stats.frames += 1;
     }
 
     #[allow(deprecated)] // MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, still sent by older stations
@@ -1430,5 +1485,19 @@ mod tests {
         b.signer = None;
         b.send(arm_message(true));
         assert!(b.armed());
+    }
+
+    #[test]
+    fn override_gaps_are_counted_in_vehicle_time() {
+        let mut b = Bench::new();
+        assert_eq!(b.ap.rc_stats().quantile_ms(0.5), None);
+        b.run(10.0, Some(1500), true); // an override every 0.2 s
+        let stats = b.ap.rc_stats();
+        assert_eq!(stats.frames, 50);
+        assert_eq!(stats.quantile_ms(0.5), Some(200));
+        assert_eq!(stats.quantile_ms(0.99), Some(200));
+        b.run(1.0, None, true);
+        b.run(1.0, Some(1500), true); // a 1.2 s silence
+        assert_eq!(b.ap.rc_stats().max_ms(), Some(1200));
     }
 }

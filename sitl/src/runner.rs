@@ -25,7 +25,7 @@ use link::shield::emulator::{EmulatorConfig, EmulatorServer, Sensors as ShieldSe
 use link::transport::{duplex, is_timeout, run_sessions};
 use link::{Address, ChannelMap, FlightMode, Sticks, Transport, TransportError};
 
-use crate::autopilot::{Autopilot, AutopilotConfig};
+use crate::autopilot::{Autopilot, AutopilotConfig, RcStats};
 use crate::sensors::Readings;
 use crate::sim::{CameraFrame, Sim, SimConfig, SimError};
 use crate::vehicle::{Vehicle, VehicleEvent};
@@ -122,6 +122,8 @@ struct Shared {
     cut: Mutex<Vec<usize>>,
     /// Vehicles whose camera has failed (their frames are no longer sent).
     dead_cameras: Mutex<Vec<u8>>,
+    /// Each vehicle's RC override regularity, refreshed every simulated second.
+    rc_stats: Mutex<Vec<Option<RcStats>>>,
 }
 
 /// A running simulator. Dropping it stops every thread and closes every endpoint.
@@ -156,6 +158,7 @@ impl Sitl {
             subscribers: Mutex::new(vec![]),
             cut: Mutex::new(vec![]),
             dead_cameras: Mutex::new(vec![]),
+            rc_stats: Mutex::new(vec![]),
         });
         let mut threads = vec![];
         let mut endpoints: Vec<Box<dyn Endpoint>> = vec![];
@@ -312,6 +315,16 @@ impl Sitl {
         }
     }
 
+    /// How regularly each vehicle received RC overrides (MAVLink vehicles; `None` for the
+    /// shield), as of the last simulated second.
+    pub fn rc_stats(&self) -> Vec<Option<RcStats>> {
+        self.shared
+            .rc_stats
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone()
+    }
+
     /// Runs `f` on the simulation between two physics ticks (ground truth, wind, ...).
     pub fn with_sim<R>(&self, f: impl FnOnce(&mut Sim) -> R) -> R {
         f(&mut self
@@ -367,6 +380,10 @@ trait Endpoint: Send {
     );
     /// The link dies: nothing in or out from now on.
     fn cut(&mut self);
+    /// How regularly RC overrides arrived, if the protocol has them.
+    fn rc_stats(&self) -> Option<RcStats> {
+        None
+    }
 }
 
 /// The shield firmware in front of a Naza-like controller in ATTI mode.
@@ -553,6 +570,10 @@ impl Endpoint for MavlinkEndpoint {
         self.cut = true;
     }
 
+    fn rc_stats(&self) -> Option<RcStats> {
+        Some(self.autopilot.rc_stats().clone())
+    }
+
     fn control(&mut self, now: Duration, vehicle: &mut Vehicle) {
         let frames = std::mem::take(
             &mut self
@@ -611,6 +632,10 @@ fn physics(shared: &Shared, mut endpoints: Vec<Box<dyn Endpoint>>, speed: f64) {
                 }
             }
             let due = sim.due_cameras();
+            if now.as_millis() % 1000 == 0 {
+                *shared.rc_stats.lock().unwrap_or_else(PoisonError::into_inner) =
+                    endpoints.iter().map(|e| e.rc_stats()).collect();
+            }
             (sim.camera_shots(&due), now)
         };
         // Rendered without holding the simulation, so its users (ground truth, wind) never wait.
