@@ -81,6 +81,12 @@ fn two_drones_explore_the_default_world_land_and_write_their_outputs() {
     for d in drones {
         assert!(number(&d["path_length_m"]) > 3.0, "{d}");
         assert!(number(&d["flight_pose_error_m"]) < 0.1, "{d}");
+        // RC overrides reached each autopilot regularly: far inside its 3 s override timeout
+        // (in lock-step with the station's SLAM, simulated time can jump a camera period, 0.1 s,
+        // between two frames).
+        assert!(number(&d["rc_frames"]) > 1000.0, "{d}");
+        assert!(number(&d["rc_gap_p99_ms"]) <= 200.0, "{d}");
+        assert!(number(&d["rc_gap_max_ms"]) <= 1000.0, "{d}");
     }
     // Progress went to stderr while it ran.
     assert!(stderr.contains("coverage"), "{stderr}");

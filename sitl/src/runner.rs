@@ -633,7 +633,10 @@ fn physics(shared: &Shared, mut endpoints: Vec<Box<dyn Endpoint>>, speed: f64) {
             }
             let due = sim.due_cameras();
             if now.as_millis() % 1000 == 0 {
-                *shared.rc_stats.lock().unwrap_or_else(PoisonError::into_inner) =
+                *shared
+                    .rc_stats
+                    .lock()
+                    .unwrap_or_else(PoisonError::into_inner) =
                     endpoints.iter().map(|e| e.rc_stats()).collect();
             }
             (sim.camera_shots(&due), now)

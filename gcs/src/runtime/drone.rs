@@ -107,6 +107,9 @@ pub struct DroneConfig {
     pub home_reach_m: f64,
     /// Send LAND again if the vehicle is still armed this long after it, seconds.
     pub land_retry_s: f64,
+    /// A flying drone whose vehicle reports itself disarmed this long has landed on its own (its
+    /// battery failsafe, its pilot), seconds.
+    pub disarmed_landed_s: f64,
 }
 
 impl Default for DroneConfig {
@@ -148,6 +151,7 @@ impl Default for DroneConfig {
             camera_timeout_s: 5.0,
             home_reach_m: 0.3,
             land_retry_s: 20.0,
+            disarmed_landed_s: 2.0,
         }
     }
 }
@@ -194,6 +198,8 @@ pub struct Drone {
     /// The phase the link was lost in.
     lost_in: Option<Phase>,
     blind_since: Option<f64>,
+    /// Since when the vehicle has reported itself disarmed while the station flew it.
+    disarmed_since: Option<f64>,
     /// Mission time of its last camera frame (none yet: no camera is watched).
     last_frame: Option<f64>,
     /// When the last LAND was sent (mission time), while landing.
@@ -246,6 +252,7 @@ impl Drone {
             lost_in: None,
             blind_since: None,
             last_frame: None,
+            disarmed_since: None,
             landing_since: None,
             last_tick: None,
             sticks: None,
@@ -486,6 +493,33 @@ impl Drone {
         if let Some((command, result)) = self.answer() {
             self.on_answer(command, result);
         }
+        // The vehicle lands on its own (ArduPilot's battery or EKF failsafe, a pilot): follow it.
+        if self.phase.flying() {
+            if telemetry.mode.as_deref() == Some("LAND") {
+                self.say(
+                    "the vehicle is landing on its own (LAND mode: its failsafe or its pilot)"
+                        .into(),
+                );
+                self.set_sticks(Sticks::CENTRED); // no stick may reposition it
+                self.phase = Phase::Landing;
+                self.goal = None;
+                self.follower.set_path(vec![]);
+                self.landing_since = Some(now);
+            } else if telemetry.armed == Some(false) {
+                let since = *self.disarmed_since.get_or_insert(now);
+                if now - since >= config.disarmed_landed_s {
+                    self.say("the vehicle disarmed on its own: landed".into());
+                    self.phase = Phase::Landed;
+                    self.goal = None;
+                    self.follower.set_path(vec![]);
+                    self.link.set_sticks(None);
+                    self.sticks = None;
+                    return None;
+                }
+            } else {
+                self.disarmed_since = None;
+            }
+        }
         match self.phase {
             Phase::Idle | Phase::Landed | Phase::LinkLost => return None,
             Phase::Arming => {
@@ -722,10 +756,13 @@ mod tests {
 
     use super::*;
 
-    /// A vehicle that accepts every command and stays armed whatever it is told.
+    /// A vehicle that accepts every command and stays armed whatever it is told (unless a
+    /// test disarms it or changes its mode, as its own failsafe would).
     #[derive(Default)]
     struct StubbornVehicle {
         commands: Mutex<Vec<Command>>,
+        disarmed: std::sync::atomic::AtomicBool,
+        mode: Mutex<Option<String>>,
     }
 
     impl VehicleLink for StubbornVehicle {
@@ -742,7 +779,12 @@ mod tests {
         }
         fn telemetry(&self) -> Telemetry {
             Telemetry {
-                armed: Some(true),
+                armed: Some(!self.disarmed.load(std::sync::atomic::Ordering::Relaxed)),
+                mode: self
+                    .mode
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner)
+                    .clone(),
                 height_m: Some(0.9),
                 ..Telemetry::default()
             }
@@ -847,6 +889,48 @@ mod tests {
             );
             std::thread::sleep(std::time::Duration::from_millis(10));
         }
+    }
+
+    #[test]
+    fn a_vehicle_that_lands_or_disarms_on_its_own_is_followed() {
+        let config = DroneConfig::default();
+        // Its failsafe switches to LAND: the station stops steering and waits for it to land.
+        let vehicle = Arc::new(StubbornVehicle::default());
+        let mut drone = exploring_drone(vehicle.clone(), &config);
+        drone.tick(0.1, &config);
+        *vehicle.mode.lock().unwrap() = Some("LAND".into());
+        drone.tick(0.2, &config);
+        assert_eq!(drone.phase, Phase::Landing);
+        let s = drone.sticks.expect("sticks");
+        assert_eq!((s.roll, s.pitch, s.yaw), (0.0, 0.0, 0.0));
+        vehicle
+            .disarmed
+            .store(true, std::sync::atomic::Ordering::Relaxed);
+        drone.tick(0.3, &config);
+        assert_eq!(drone.phase, Phase::Landed);
+
+        // It disarms without a word (battery failsafe seen late, a pilot): landed after 2 s.
+        let vehicle = Arc::new(StubbornVehicle::default());
+        let mut drone = exploring_drone(vehicle.clone(), &config);
+        drone.phase = Phase::Returning;
+        vehicle
+            .disarmed
+            .store(true, std::sync::atomic::Ordering::Relaxed);
+        drone.tick(10.0, &config);
+        drone.tick(11.0, &config);
+        assert_eq!(
+            drone.phase,
+            Phase::Returning,
+            "a stale heartbeat is not a landing"
+        );
+        drone.tick(10.0 + config.disarmed_landed_s + 0.1, &config);
+        assert_eq!(drone.phase, Phase::Landed);
+        assert!(
+            drone
+                .take_messages()
+                .iter()
+                .any(|m| m.contains("disarmed on its own"))
+        );
     }
 
     #[test]
