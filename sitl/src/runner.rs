@@ -632,7 +632,7 @@ fn physics(shared: &Shared, mut endpoints: Vec<Box<dyn Endpoint>>, speed: f64) {
                 }
             }
             let due = sim.due_cameras();
-            if now.as_millis() % 1000 == 0 {
+            if now.as_millis().is_multiple_of(1000) {
                 *shared
                     .rc_stats
                     .lock()
