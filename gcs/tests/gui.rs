@@ -5,7 +5,7 @@
 mod common;
 
 use std::path::Path;
-use std::process::Command;
+use std::process::{Command, Stdio};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -141,6 +141,19 @@ fn under_xvfb() -> Command {
     c
 }
 
+/// The process whose command line holds `argument` (the `gcs` that `xvfb-run` started).
+fn process_with_argument(argument: &str) -> Option<u32> {
+    std::fs::read_dir("/proc").ok()?.find_map(|e| {
+        let pid: u32 = e.ok()?.file_name().to_str()?.parse().ok()?;
+        let cmdline = std::fs::read(format!("/proc/{pid}/cmdline")).ok()?;
+        let is_gcs = cmdline
+            .split(|b| *b == 0)
+            .next()
+            .is_some_and(|exe| exe.ends_with(b"gcs"));
+        (is_gcs && cmdline.split(|b| *b == 0).any(|a| a == argument.as_bytes())).then_some(pid)
+    })
+}
+
 /// The window itself, under Xvfb with software OpenGL, exploring; its screenshot must show the
 /// map. Writes `target/gui-screenshot.png` (the README's picture is made the same way).
 #[test]
@@ -167,8 +180,32 @@ fn real_window_under_xvfb_shows_the_map() {
         .arg(&shot)
         .arg("--out")
         .arg(&out)
-        .output()
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
         .expect("run xvfb-run");
+    // While it flies: the window and its simulator accept connections on loopback only.
+    let until = Instant::now() + Duration::from_secs(30);
+    let mut open = vec![];
+    while open.len() < 2 && Instant::now() < until {
+        if let Some(pid) = process_with_argument(&out.to_string_lossy()) {
+            open = common::open_ports(pid);
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    assert!(
+        open.len() >= 2,
+        "the simulator's two vehicle endpoints never showed: {open:?}"
+    );
+    let exposed: Vec<_> = open
+        .iter()
+        .filter(|(_, a)| !common::is_loopback(a))
+        .collect();
+    assert!(
+        exposed.is_empty(),
+        "gcs gui is reachable from the network: {exposed:?}"
+    );
+    let run = run.wait_with_output().expect("wait for xvfb-run");
     let stderr = String::from_utf8_lossy(&run.stderr);
     assert!(run.status.success(), "gcs gui failed:\n{stderr}");
     assert!(stderr.contains("screenshot written"), "{stderr}");
