@@ -494,6 +494,9 @@ impl Drone {
             self.on_answer(command, result);
         }
         // The vehicle lands on its own (ArduPilot's battery or EKF failsafe, a pilot): follow it.
+        if !self.phase.flying() || telemetry.armed != Some(false) {
+            self.disarmed_since = None;
+        }
         if self.phase.flying() {
             if telemetry.mode.as_deref() == Some("LAND") {
                 self.say(
@@ -509,6 +512,7 @@ impl Drone {
                 let since = *self.disarmed_since.get_or_insert(now);
                 if now - since >= config.disarmed_landed_s {
                     self.say("the vehicle disarmed on its own: landed".into());
+                    self.disarmed_since = None;
                     self.phase = Phase::Landed;
                     self.goal = None;
                     self.follower.set_path(vec![]);
@@ -516,8 +520,6 @@ impl Drone {
                     self.sticks = None;
                     return None;
                 }
-            } else {
-                self.disarmed_since = None;
             }
         }
         match self.phase {
@@ -925,6 +927,10 @@ mod tests {
         );
         drone.tick(10.0 + config.disarmed_landed_s + 0.1, &config);
         assert_eq!(drone.phase, Phase::Landed);
+        // Flying again later, a first stale "disarmed" is not an old landing come back.
+        drone.phase = Phase::TakingOff;
+        drone.tick(12.5, &config);
+        assert_eq!(drone.phase, Phase::TakingOff);
         assert!(
             drone
                 .take_messages()
