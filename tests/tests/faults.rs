@@ -166,9 +166,17 @@ fn copter(address: &str) -> Sitl {
     .expect("the simulator starts")
 }
 
-fn first_vehicle(link: &MavlinkLink) -> MavlinkVehicle {
-    link.wait_for_vehicle(5 * S)
-        .expect("no vehicle heard through the proxy")
+/// The station's MAVLink link through the proxy, and the first vehicle it hears.
+fn station_through(proxy: &FaultProxy) -> (MavlinkLink, MavlinkVehicle) {
+    let link = MavlinkLink::connect(
+        &proxy.station_address().parse().expect("address"),
+        MavlinkConfig::default(),
+    )
+    .expect("open the link");
+    let vehicle = link
+        .wait_for_vehicle(5 * S)
+        .expect("no vehicle heard through the proxy");
+    (link, vehicle)
 }
 
 /// The yaw stick the simulated flight controller acts on.
@@ -200,12 +208,7 @@ fn mavlink_over_a_lossy_udp_link_arms_and_its_overrides_arrive() {
         delay: Duration::from_millis(10),
         jitter: Duration::from_millis(20),
     });
-    let link = MavlinkLink::connect(
-        &proxy.station_address().parse().expect("address"),
-        MavlinkConfig::default(),
-    )
-    .expect("open the link");
-    let v = first_vehicle(&link);
+    let (_link, v) = station_through(&proxy);
     v.set_sticks(Some(SLOW_TURN));
     command_until_done(&v, Command::Arm);
     assert!(yaw_arrives(&sitl, 0.3, 3 * S), "overrides never arrived");
@@ -232,12 +235,7 @@ fn mavlink_over_tcp_sees_a_stall_within_its_bound_and_overrides_resume_after_a_r
     let sitl = copter("tcpin:127.0.0.1:0");
     let vehicle = sitl.endpoint_addrs()[0].expect("a TCP port");
     let proxy = FaultProxy::tcp(vehicle, 5).expect("proxy");
-    let link = MavlinkLink::connect(
-        &proxy.station_address().parse().expect("address"),
-        MavlinkConfig::default(),
-    )
-    .expect("open the link");
-    let v = first_vehicle(&link);
+    let (_link, v) = station_through(&proxy);
     v.set_sticks(Some(SLOW_TURN));
     assert!(yaw_arrives(&sitl, 0.3, 3 * S));
     assert!(eventually(3 * S, || v.status().state == LinkState::Connected));

@@ -161,11 +161,31 @@ impl KeyStore {
     }
 }
 
+/// Refuses `path` if anyone but its owner may read, write or enter it (`want`: the mode to
+/// suggest).
+#[cfg(unix)]
+fn owner_only(path: &Path, want: u32) -> Result<(), KeyError> {
+    use std::os::unix::fs::PermissionsExt;
+    let mode = std::fs::metadata(path)
+        .map_err(io(path))?
+        .permissions()
+        .mode()
+        & 0o777;
+    if mode & 0o077 != 0 {
+        return Err(KeyError::Permissions {
+            path: path.into(),
+            mode,
+            want,
+        });
+    }
+    Ok(())
+}
+
 /// Makes `dir` (and its parents) and refuses it if others may enter it.
 fn make_private_dir(dir: &Path) -> Result<(), KeyError> {
     #[cfg(unix)]
     {
-        use std::os::unix::fs::{DirBuilderExt, PermissionsExt};
+        use std::os::unix::fs::DirBuilderExt;
         if !dir.exists() {
             std::fs::DirBuilder::new()
                 .recursive(true)
@@ -173,18 +193,7 @@ fn make_private_dir(dir: &Path) -> Result<(), KeyError> {
                 .create(dir)
                 .map_err(io(dir))?;
         }
-        let mode = std::fs::metadata(dir)
-            .map_err(io(dir))?
-            .permissions()
-            .mode()
-            & 0o777;
-        if mode & 0o077 != 0 {
-            return Err(KeyError::Permissions {
-                path: dir.into(),
-                mode,
-                want: 0o700,
-            });
-        }
+        owner_only(dir, 0o700)?;
     }
     #[cfg(not(unix))]
     std::fs::create_dir_all(dir).map_err(io(dir))?;
@@ -213,21 +222,7 @@ pub fn write_key_file(path: &Path, secret: &[u8; 32]) -> Result<(), KeyError> {
 /// Reads a key file: 64 hexadecimal digits, readable by its owner only.
 pub fn read_key_file(path: &Path) -> Result<SigningKey, KeyError> {
     #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        let mode = std::fs::metadata(path)
-            .map_err(io(path))?
-            .permissions()
-            .mode()
-            & 0o777;
-        if mode & 0o077 != 0 {
-            return Err(KeyError::Permissions {
-                path: path.into(),
-                mode,
-                want: 0o600,
-            });
-        }
-    }
+    owner_only(path, 0o600)?;
     let text = std::fs::read_to_string(path).map_err(io(path))?;
     SigningKey::from_hex(&text).map_err(|why| KeyError::Malformed {
         path: path.into(),
