@@ -774,13 +774,12 @@ mod tests {
         assert!("mavlink@tcp:1.2.3.4".parse::<EndpointSpec>().is_err());
     }
 
-    #[test]
-    fn runs_faster_than_real_time_and_streams_camera_frames_in_process() {
-        let world = Arc::new(World::load(crate::world::DEFAULT_WORLD).unwrap());
-        let sitl = Sitl::start(SitlConfig {
-            world,
+    /// Two MAVLink vehicles in the default world at 20× real time, cameras of `w`×`h`.
+    fn two_copters(w: u32, h: u32) -> Sitl {
+        Sitl::start(SitlConfig {
+            world: Arc::new(World::load(crate::world::DEFAULT_WORLD).unwrap()),
             sim: SimConfig {
-                camera: Some(crate::Camera::kinect(64, 48)),
+                camera: Some(crate::Camera::kinect(w, h)),
                 ..SimConfig::default()
             },
             vehicles: vec!["mavlink@udpin:127.0.0.1:0".parse().unwrap(); 2],
@@ -788,7 +787,12 @@ mod tests {
             speed: 20.0,
             signing_key: None,
         })
-        .unwrap();
+        .unwrap()
+    }
+
+    #[test]
+    fn runs_faster_than_real_time_and_streams_camera_frames_in_process() {
+        let sitl = two_copters(64, 48);
         let frames = sitl.subscribe();
         let t0 = Instant::now();
         let mut seen = [0usize; 2];
@@ -806,19 +810,7 @@ mod tests {
 
     #[test]
     fn a_killed_camera_sends_nothing_more_while_the_others_go_on() {
-        let world = Arc::new(World::load(crate::world::DEFAULT_WORLD).unwrap());
-        let sitl = Sitl::start(SitlConfig {
-            world,
-            sim: SimConfig {
-                camera: Some(crate::Camera::kinect(32, 24)),
-                ..SimConfig::default()
-            },
-            vehicles: vec!["mavlink@udpin:127.0.0.1:0".parse().unwrap(); 2],
-            camera: None,
-            speed: 20.0,
-            signing_key: None,
-        })
-        .unwrap();
+        let sitl = two_copters(32, 24);
         sitl.kill_camera(0);
         let frames = sitl.subscribe();
         let mut seen = [0usize; 2];
