@@ -53,6 +53,10 @@ pub struct SimArgs {
     /// simulator's ground truth (`truth`, to measure navigation alone).
     #[arg(long, value_enum, default_value_t = PoseSource::Slam)]
     pub poses: PoseSource,
+    /// Each drone's flight time on one battery at hover, minutes (the low-battery return comes
+    /// at 25 % left).
+    #[arg(long, value_name = "MINUTES", default_value_t = 12.0)]
+    pub flight_time: f64,
 }
 
 /// Arguments of `gcs explore`.
@@ -216,6 +220,12 @@ fn validate(args: &ExploreArgs) -> anyhow::Result<Vec<Fault>> {
             args.sim.speed
         );
     }
+    if !(args.sim.flight_time.is_finite() && (1.0..=600.0).contains(&args.sim.flight_time)) {
+        bail!(
+            "--flight-time {} must be between 1 and 600 minutes",
+            args.sim.flight_time
+        );
+    }
     if !(args.timeout.is_finite() && args.timeout > 0.0) {
         bail!(
             "--timeout {} must be a positive number of simulated seconds",
@@ -328,6 +338,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
         link: args.sim.link,
         speed: args.sim.speed,
         seed: args.sim.seed,
+        flight_time_s: args.sim.flight_time * 60.0,
         tlog_dir: (!args.no_log).then(|| args.out.clone()),
     })?;
     eprintln!(
@@ -502,12 +513,13 @@ fn watch(
                 .map(|d| format!("{}: {}", d.id + 1, d.phase.name()))
                 .collect();
             eprintln!(
-                "[{:6.1} s] coverage {:5.1} %  {}  {} keyframes, {} loops  ({:.1}× real time)",
+                "[{:6.1} s] coverage {:5.1} %  {}  {} keyframes, {} loops, SLAM {:.1} ms/frame  ({:.1}× real time)",
                 elapsed,
                 cov * 100.0,
                 states.join(", "),
                 s.slam.stats.keyframes,
                 s.slam.stats.loop_closures,
+                s.slam.ms_per_frame,
                 (now - t0) / wall.elapsed().as_secs_f64().max(1e-3)
             );
         }

@@ -11,7 +11,7 @@ use link::mavlink::{MavlinkConfig, MavlinkLink};
 use link::shield::{ShieldConfig, ShieldLink};
 use link::{LinkState, VehicleClock, VehicleLink};
 use nalgebra::Isometry3;
-use sitl::{Camera, EndpointSpec, Protocol, SimConfig, Sitl, SitlConfig, World};
+use sitl::{Camera, EndpointSpec, Protocol, SimConfig, Sitl, SitlConfig, VehicleParams, World};
 use slam::system::RobotSetup;
 
 use crate::clock::{Clock, SimulatedClock};
@@ -50,6 +50,8 @@ pub struct SimFleetConfig {
     pub speed: f64,
     /// Seed of the simulator's noise.
     pub seed: u64,
+    /// Each vehicle's flight time on one battery at hover, seconds.
+    pub flight_time_s: f64,
     /// Record each MAVLink vehicle's traffic to `droneK.tlog` here.
     pub tlog_dir: Option<std::path::PathBuf>,
 }
@@ -99,6 +101,10 @@ impl SimFleet {
                 seed: config.seed,
                 camera: Some(Camera::kinect(320, 240)),
                 camera_hz: 10.0,
+                vehicle: VehicleParams {
+                    endurance_s: config.flight_time_s,
+                    ..VehicleParams::default()
+                },
                 ..SimConfig::default()
             },
             vehicles,

@@ -56,6 +56,7 @@ fn window_buttons_fly_the_simulated_fleet_and_show_a_lost_link() {
         link: LinkKind::Mavlink,
         speed: 3.0,
         seed: 1,
+        flight_time_s: 720.0,
         tlog_dir: None,
     })
     .expect("the simulated fleet starts");

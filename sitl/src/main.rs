@@ -9,7 +9,7 @@ use anyhow::{Context, bail};
 use clap::{Parser, Subcommand};
 use sitl::render::render;
 use sitl::world::{BUILT_IN, DEFAULT_WORLD};
-use sitl::{Camera, EndpointSpec, Protocol, SimConfig, Sitl, SitlConfig, World};
+use sitl::{Camera, EndpointSpec, Protocol, SimConfig, Sitl, SitlConfig, VehicleParams, World};
 
 /// The simulator: drones behind a shield or a MAVLink autopilot, their RGB-D cameras, a building.
 #[derive(Parser)]
@@ -65,6 +65,9 @@ struct RunArgs {
     /// Turbulence, m/s (standard deviation of the wind; 0 for still air).
     #[arg(long, default_value_t = 0.1)]
     gust: f64,
+    /// Each vehicle's flight time on one battery at hover, minutes.
+    #[arg(long, value_name = "MINUTES", default_value_t = 12.0)]
+    flight_time: f64,
     /// Stop after this many simulated seconds (default: run until interrupted).
     #[arg(long)]
     duration: Option<f64>,
@@ -185,6 +188,10 @@ fn run(args: RunArgs) -> anyhow::Result<()> {
             camera: Some(Camera::kinect(w, h)),
             camera_hz: args.camera_hz,
             gust_mps: args.gust,
+            vehicle: VehicleParams {
+                endurance_s: args.flight_time * 60.0,
+                ..VehicleParams::default()
+            },
             ..SimConfig::default()
         },
         vehicles: args.vehicles.clone(),

@@ -114,6 +114,12 @@ impl Sim {
         if !(config.gust_mps.is_finite() && config.gust_mps >= 0.0 && config.gust_tau_s > 0.0) {
             return Err(SimError::Config("gusts need σ ≥ 0 m/s and τ > 0 s".into()));
         }
+        let endurance = config.vehicle.endurance_s;
+        if !(endurance.is_finite() && endurance >= 60.0) {
+            return Err(SimError::Config(format!(
+                "flight time {endurance} s must be at least a minute"
+            )));
+        }
         let vehicles = (0..n)
             .map(|k| {
                 let [x, y] = world.starts()[k];
@@ -393,6 +399,47 @@ mod tests {
             e.to_string(),
             "world 'apartment' has room for 8 drones, 9 were asked for"
         );
+    }
+
+    #[test]
+    fn the_flight_time_sets_how_long_a_battery_lasts_and_is_checked() {
+        let world = Arc::new(World::load(crate::world::DEFAULT_WORLD).unwrap());
+        let left_after_a_minute = |endurance_s: f64| {
+            let config = SimConfig {
+                camera: None,
+                gust_mps: 0.0,
+                vehicle: VehicleParams {
+                    endurance_s,
+                    ..VehicleParams::default()
+                },
+                ..SimConfig::default()
+            };
+            let mut sim = Sim::new(world.clone(), 1, config).unwrap();
+            sim.vehicle_mut(0).set_armed(true);
+            sim.vehicle_mut(0).set_sticks(Sticks {
+                throttle: 0.3,
+                ..Sticks::CENTRED
+            });
+            for _ in 0..6000 {
+                sim.step(Duration::from_millis(10));
+            }
+            assert!(!sim.vehicle(0).state().landed);
+            sim.vehicle(0).battery_remaining()
+        };
+        // A minute of a 12-minute pack (a little of it on the floor) and of an hour's pack.
+        assert!((91..=92).contains(&left_after_a_minute(720.0)));
+        assert!((98..=99).contains(&left_after_a_minute(3600.0)));
+        for endurance_s in [30.0, f64::NAN, f64::INFINITY] {
+            let config = SimConfig {
+                vehicle: VehicleParams {
+                    endurance_s,
+                    ..VehicleParams::default()
+                },
+                ..SimConfig::default()
+            };
+            let e = Sim::new(world.clone(), 1, config).err().unwrap();
+            assert!(e.to_string().contains("at least a minute"), "{e}");
+        }
     }
 
     #[test]

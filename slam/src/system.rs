@@ -519,11 +519,19 @@ pub struct Slam {
     /// Anchoring candidates between two frames: (kept, absorbed) → kept_from_absorbed.
     merge_votes: HashMap<(usize, usize), Vec<Isometry3<f64>>>,
     place: PlaceIndex,
+    /// Mapping with known poses: keyframes by the cell (of the keyframe spacing) their camera
+    /// is in, to find one already holding a view.
+    views: HashMap<[i64; 3], Vec<usize>>,
     worker: Option<Worker>,
     in_flight: bool,
     map: LiveMap,
     stats: SlamStats,
 }
+
+/// Mapping with known poses, a keyframe within this many times the keyframe spacing (in
+/// distance and in angle) of a new view already holds it: a hovering drone drifts a few
+/// decimetres, and a view that close adds next to nothing to the map.
+pub const KNOWN_VIEW_REUSE: f64 = 2.0;
 
 /// Information matrix (6×6, row-major) with isotropic translation and rotation weights.
 fn isotropic_info(sigma_t: f64, sigma_r: f64) -> Vec<f64> {
@@ -595,6 +603,7 @@ impl Slam {
             priors: vec![],
             merge_votes: HashMap::new(),
             place: PlaceIndex::new(),
+            views: HashMap::new(),
             worker,
             in_flight: false,
             stats: SlamStats::default(),
@@ -771,27 +780,58 @@ impl Slam {
         }
     }
 
-    /// Mapping only: the frame's known pose; a keyframe when it moved far enough.
+    /// Whether `a_from_b` is within `scale` times the keyframe spacing.
+    fn near_view(&self, a_from_b: &Isometry3<f64>, scale: f64) -> bool {
+        a_from_b.translation.vector.norm() <= scale * self.config.keyframe_translation
+            && a_from_b.rotation.angle() <= scale * self.config.keyframe_rotation
+    }
+
+    /// The cell of the known-pose keyframe index a camera position falls in (cells as wide as
+    /// the reach of [`KNOWN_VIEW_REUSE`]).
+    fn view_cell(&self, pose: &Isometry3<f64>) -> [i64; 3] {
+        let size = (KNOWN_VIEW_REUSE * self.config.keyframe_translation).max(1e-3);
+        let v = pose.translation.vector / size;
+        [v.x, v.y, v.z].map(|c| c.floor() as i64)
+    }
+
+    /// Mapping only: the frame's known pose; a keyframe when it moved far enough from its
+    /// reference and no keyframe (of any robot) already holds this view (is within
+    /// [`KNOWN_VIEW_REUSE`] times the spacing). Flying again through mapped space then adds
+    /// nothing, so the SLAM's memory grows with the building, not with the flight time.
     fn place_known(&mut self, frame: &Frame, pose: Isometry3<f64>) -> FrameReport {
         let k = frame.robot;
         let reference = self.robots[k].reference;
         let relative = reference.map(|n| self.nodes[n].pose.inverse() * pose);
-        let moved = relative.is_none_or(|d| {
-            d.translation.vector.norm() > self.config.keyframe_translation
-                || d.rotation.angle() > self.config.keyframe_rotation
-        });
+        let moved = relative.is_none_or(|d| !self.near_view(&d, 1.0));
         let mut keyframe = None;
         if moved {
-            let empty = Arc::new(Observation {
-                keypoints: vec![],
-                descriptors: vec![],
-                points: vec![],
-                camera: frame.camera,
-            });
-            let n = self.add_node(frame, empty, pose, reference);
+            let cell = self.view_cell(&pose);
+            let existing = (-1..=1)
+                .flat_map(|i| (-1..=1).flat_map(move |j| (-1..=1).map(move |l| [i, j, l])))
+                .filter_map(|[i, j, l]| self.views.get(&[cell[0] + i, cell[1] + j, cell[2] + l]))
+                .flatten()
+                .copied()
+                .find(|&n| {
+                    let d = self.nodes[n].pose.inverse() * pose;
+                    Some(n) != reference && self.near_view(&d, KNOWN_VIEW_REUSE)
+                });
+            let n = match existing {
+                Some(n) => n,
+                None => {
+                    let empty = Arc::new(Observation {
+                        keypoints: vec![],
+                        descriptors: vec![],
+                        points: vec![],
+                        camera: frame.camera,
+                    });
+                    let n = self.add_node(frame, empty, pose, reference);
+                    self.views.entry(cell).or_default().push(n);
+                    keyframe = Some(n);
+                    n
+                }
+            };
             self.robots[k].reference = Some(n);
-            self.robots[k].reference_from_camera = Isometry3::identity();
-            keyframe = Some(n);
+            self.robots[k].reference_from_camera = self.nodes[n].pose.inverse() * pose;
         } else if let Some(d) = relative {
             self.robots[k].reference_from_camera = d;
         }

@@ -232,7 +232,7 @@ impl MapView {
     ) {
         let colour = drone_colour(d.id);
         if self.layers.trajectories && d.trajectory.len() > 1 {
-            let points: Vec<Pos2> = d.trajectory.iter().map(|p| to_screen(*p)).collect();
+            let points: Vec<Pos2> = d.trajectory.iter().map(to_screen).collect();
             painter.add(Shape::line(
                 points,
                 Stroke::new(1.5, colour.gamma_multiply(0.6)),
@@ -241,7 +241,7 @@ impl MapView {
         let Some(pose) = d.pose else {
             // No valid pose: where it was last seen, hollow, so the operator still finds it.
             if let Some(last) = d.trajectory.last() {
-                let at = to_screen(*last);
+                let at = to_screen(last);
                 painter.circle_stroke(at, 8.0, Stroke::new(2.0, colour));
                 painter.text(
                     at + egui::vec2(10.0, -12.0),

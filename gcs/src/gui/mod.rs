@@ -556,6 +556,7 @@ mod tests {
 
     use super::*;
     use crate::runtime::drone::Phase;
+    use crate::runtime::trail::Trail;
     use crate::runtime::{DroneCommand, DroneView};
 
     fn drone(id: usize, phase: Phase, link: LinkState) -> DroneView {
@@ -591,7 +592,7 @@ mod tests {
             slam: RobotState::Tracking,
             goal: Some([4.0, 3.0]),
             path: vec![[1.0, 2.0], [2.5, 2.5], [4.0, 3.0]],
-            trajectory: Arc::new(vec![[0.5, 2.0], [1.0, 2.0]]),
+            trajectory: Trail::from_points([[0.5, 2.0], [1.0, 2.0]]),
             height_goal: 0.9,
             yaw_goal: 0.5,
             sticks: None,

@@ -13,6 +13,7 @@
 
 pub mod drone;
 pub mod perception;
+pub mod trail;
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, Sender, channel};
@@ -29,6 +30,7 @@ use crate::clock::Clock;
 use crate::record::{Record, Recorder};
 use drone::{Drone, DroneConfig, DroneEvent, DroneSpec, Phase};
 use perception::{CameraFrame, Perception, PerceptionResult, SensorLog, SensorSample, SlamView};
+use trail::Trail;
 
 /// Mission settings.
 #[derive(Debug, Clone)]
@@ -190,7 +192,7 @@ pub struct DroneView {
     /// The path it follows.
     pub path: Vec<[f64; 2]>,
     /// Where it has been (x, y), decimated.
-    pub trajectory: Arc<Vec<[f64; 2]>>,
+    pub trajectory: Trail,
     /// Goal height, metres.
     pub height_goal: f64,
     /// Goal yaw, radians.
@@ -379,14 +381,14 @@ struct Mission {
     frontiers: Vec<[f64; 2]>,
     messages: Vec<(f64, String)>,
     /// Decimated trajectories for displays.
-    trajectories: Vec<Arc<Vec<[f64; 2]>>>,
+    trajectories: Vec<Trail>,
     recorder: Option<Recorder>,
     last_plan_record: f64,
 }
 
 impl Mission {
     fn run(&mut self) -> MissionReport {
-        self.trajectories = (0..self.drones.len()).map(|_| Arc::default()).collect();
+        self.trajectories = vec![Trail::default(); self.drones.len()];
         let mut next_control = self.clock.now();
         let mut next_plan = next_control + 2.0;
         // When the operator (or the process) asked to end: the runtime waits for the drones to
@@ -795,9 +797,9 @@ impl Mission {
             .unwrap_or_default();
         for (k, d) in self.drones.iter().enumerate() {
             if let Some(p) = d.pose() {
-                let last = self.trajectories[k].last().copied();
+                let last = self.trajectories[k].last();
                 if last.is_none_or(|l| (l[0] - p[0]).hypot(l[1] - p[1]) > 0.05) {
-                    Arc::make_mut(&mut self.trajectories[k]).push([p[0], p[1]]);
+                    self.trajectories[k].push([p[0], p[1]]);
                 }
             }
         }
