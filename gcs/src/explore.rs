@@ -77,6 +77,11 @@ pub struct ExploreArgs {
     /// Do not record the MCAP log and `.tlog`s.
     #[arg(long)]
     pub no_log: bool,
+    /// Record camera frames at most this many times a second per drone (0: none); every frame
+    /// by default. Colour and depth at 10 Hz are about 1 MB per drone per second; replay reruns
+    /// the SLAM only on the frames recorded.
+    #[arg(long, value_name = "HZ")]
+    pub log_camera_hz: Option<f64>,
     /// Kill drone K's link (1-based) at simulated time T seconds: `K@T` (a fault for tests and
     /// demonstrations; the others must finish the map). The same as `--fault link:K@T`.
     #[arg(long, value_name = "K@T")]
@@ -226,6 +231,11 @@ fn validate(args: &ExploreArgs) -> anyhow::Result<Vec<Fault>> {
             args.sim.flight_time
         );
     }
+    if let Some(hz) = args.log_camera_hz
+        && !(hz.is_finite() && hz >= 0.0)
+    {
+        bail!("--log-camera-hz {hz} must be 0 (no frames) or more");
+    }
     if !(args.timeout.is_finite() && args.timeout > 0.0) {
         bail!(
             "--timeout {} must be a positive number of simulated seconds",
@@ -353,7 +363,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
     let recorder = if args.no_log {
         None
     } else {
-        let r = Recorder::create(&args.out.join("mission.mcap"))?;
+        let r = Recorder::create(&args.out.join("mission.mcap"), args.log_camera_hz)?;
         let b = sim_body_from_camera();
         r.send(Record::Setup(Setup {
             version: 1,
@@ -397,6 +407,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
         clock.clone(),
         recorder,
     )?;
+    runtime.land_all_on_ctrl_c("explore");
     let Some(window) = window else {
         return watch(args, &world, sitl, runtime, clock, &faults);
     };

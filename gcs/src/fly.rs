@@ -27,7 +27,7 @@ use gcs::outputs;
 use gcs::record::{Record, Recorder, Setup, SetupDrone};
 use gcs::runtime::drone::{DroneSpec, StartSequence};
 use gcs::runtime::perception::CameraFrame;
-use gcs::runtime::{Operator, Outcome, Runtime, RuntimeConfig};
+use gcs::runtime::{Outcome, Runtime, RuntimeConfig};
 use link::mavlink::KeyStore;
 
 use crate::gui_cmd::{Window, beside_window};
@@ -50,6 +50,11 @@ pub struct FlyArgs {
     /// Do not record the MCAP log and `.tlog`s.
     #[arg(long)]
     pub no_log: bool,
+    /// Record camera frames at most this many times a second per drone (0: none); every frame
+    /// by default. Colour and depth at 10 Hz are about 1 MB per drone per second; replay reruns
+    /// the SLAM only on the frames recorded.
+    #[arg(long, value_name = "HZ")]
+    pub log_camera_hz: Option<f64>,
 }
 
 /// The end of a flight, as written to `summary.json`.
@@ -156,7 +161,7 @@ pub fn run_with(args: &FlyArgs, window: Option<Window>) -> anyhow::Result<()> {
     let recorder = if args.no_log {
         None
     } else {
-        let r = Recorder::create(&args.out.join("mission.mcap"))?;
+        let r = Recorder::create(&args.out.join("mission.mcap"), args.log_camera_hz)?;
         r.send(Record::Setup(Setup {
             version: 1,
             world: None,
@@ -181,14 +186,7 @@ pub fn run_with(args: &FlyArgs, window: Option<Window>) -> anyhow::Result<()> {
         clock.clone(),
         recorder,
     )?;
-    // Ctrl-C lands every drone (a second one is the operator's to give, as ever).
-    let commander = runtime.commander();
-    if let Err(e) = ctrlc::set_handler(move || {
-        eprintln!("fly: Ctrl-C: landing every drone");
-        let _ = commander.send(Operator::LandAll);
-    }) {
-        tracing::warn!("Ctrl-C will not land the drones: {e}");
-    }
+    runtime.land_all_on_ctrl_c("fly");
     eprintln!(
         "fly: {} vehicle(s) connected; {} (Ctrl-C lands all)",
         fleet.len(),

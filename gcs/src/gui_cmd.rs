@@ -35,6 +35,9 @@ pub struct GuiArgs {
     /// Do not record the MCAP log and `.tlog`s.
     #[arg(long)]
     pub no_log: bool,
+    /// Record camera frames at most this many times a second per drone (0: none).
+    #[arg(long, value_name = "HZ")]
+    pub log_camera_hz: Option<f64>,
     /// Scripted use of the window.
     #[command(flatten)]
     pub window: WindowArgs,
@@ -108,6 +111,7 @@ pub fn run(args: &GuiArgs) -> anyhow::Result<()> {
                 out: args.out.clone(),
                 json: false,
                 no_log: args.no_log,
+                log_camera_hz: args.log_camera_hz,
             },
             Some(window),
         ),
@@ -118,6 +122,7 @@ pub fn run(args: &GuiArgs) -> anyhow::Result<()> {
                 out: args.out.clone(),
                 json: false,
                 no_log: args.no_log,
+                log_camera_hz: args.log_camera_hz,
                 kill_link: None,
                 faults: vec![],
                 pose_trace: None,

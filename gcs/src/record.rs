@@ -186,6 +186,11 @@ pub struct RecordStats {
 
 struct Inner {
     path: PathBuf,
+    /// Camera frames are kept at most this often per drone, seconds (0: every frame; infinite:
+    /// none).
+    camera_period: f64,
+    /// Per drone, the stamp of the last camera frame kept.
+    last_camera: Mutex<Vec<f64>>,
     thread: Mutex<Option<JoinHandle<Result<RecordStats, String>>>>,
     dropped: AtomicU64,
     result: Mutex<Option<Result<RecordStats, String>>>,
@@ -205,8 +210,16 @@ impl std::fmt::Debug for Recorder {
 }
 
 impl Recorder {
-    /// Creates the file and starts the writer.
-    pub fn create(path: &Path) -> anyhow::Result<Self> {
+    /// Creates the file and starts the writer; camera frames are recorded at most
+    /// `camera_hz` times a second per drone (`None`: every frame; 0: none — what replay needs
+    /// goes with them, the rest of the log stays whole). Colour and depth are about 1 MB per
+    /// drone per second at 10 Hz.
+    pub fn create(path: &Path, camera_hz: Option<f64>) -> anyhow::Result<Self> {
+        let camera_period = match camera_hz {
+            None => 0.0,
+            Some(hz) if hz.is_finite() && hz >= 0.0 => 1.0 / hz,
+            Some(hz) => anyhow::bail!("camera log rate {hz} Hz must be 0 or more"),
+        };
         let file = File::create(path)
             .map_err(|e| anyhow::anyhow!("cannot create the log {}: {e}", path.display()))?;
         let writer = mcap::WriteOptions::new()
@@ -224,6 +237,8 @@ impl Recorder {
             tx,
             inner: Arc::new(Inner {
                 path: path.to_owned(),
+                camera_period,
+                last_camera: Mutex::new(vec![]),
                 thread: Mutex::new(Some(thread)),
                 dropped: AtomicU64::new(0),
                 result: Mutex::new(None),
@@ -239,9 +254,39 @@ impl Recorder {
     /// Queues a record (never blocks: when the writer is far behind, the record is dropped and
     /// counted).
     pub fn send(&self, record: Record) {
+        if let Record::Camera { t, drone, .. } = &record
+            && !self.keep_camera(*drone, *t)
+        {
+            return;
+        }
         if let Err(TrySendError::Full(_)) = self.tx.try_send(Message::Record(record)) {
             self.inner.dropped.fetch_add(1, Ordering::Relaxed);
         }
+    }
+
+    /// Whether drone `drone`'s camera frame at `t` is due under the camera log rate.
+    fn keep_camera(&self, drone: usize, t: f64) -> bool {
+        let period = self.inner.camera_period;
+        if period == 0.0 {
+            return true;
+        }
+        if period.is_infinite() {
+            return false;
+        }
+        let mut last = self
+            .inner
+            .last_camera
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner);
+        if last.len() <= drone {
+            last.resize(drone + 1, f64::NEG_INFINITY);
+        }
+        // A little slack, so that 2 Hz of a 10 Hz camera is every fifth frame.
+        if t - last[drone] < period - 1e-3 {
+            return false;
+        }
+        last[drone] = t;
+        true
     }
 
     /// Writes what is queued, closes the file and returns the counters (the first caller does
@@ -673,5 +718,90 @@ fn write_record(w: &mut McapWriter, ch: &mut Channels, r: &Record) -> Result<u64
             ch.write(w, c, *t, &encode(&m)?)?;
             Ok(1)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::time::Duration;
+
+    use link::camera::{Intrinsics, RgbdFrame};
+
+    use super::*;
+
+    /// Colour frames, and messages of other than the cameras, in a recording of two drones' 10 Hz cameras over 3 s.
+    fn camera_messages(camera_hz: Option<f64>) -> (usize, usize) {
+        let dir = std::env::temp_dir().join(format!(
+            "gcs-record-{}-{}",
+            std::process::id(),
+            camera_hz.map_or(-1.0, |h| h)
+        ));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("mission.mcap");
+        let mut recorder = Recorder::create(&path, camera_hz).unwrap();
+        for i in 0..30 {
+            for drone in 0..2 {
+                let t = f64::from(i) * 0.1;
+                let frame = RgbdFrame {
+                    vehicle: drone as u8,
+                    stamp: Duration::from_secs_f64(t),
+                    width: 4,
+                    height: 2,
+                    intrinsics: Intrinsics {
+                        fx: 2.0,
+                        fy: 2.0,
+                        cx: 2.0,
+                        cy: 1.0,
+                    },
+                    rgb: vec![90; 4 * 2 * 3],
+                    depth_mm: vec![1500; 4 * 2],
+                };
+                recorder.send(Record::Camera {
+                    t,
+                    drone,
+                    frame: Arc::new(frame),
+                    truth: None,
+                });
+            }
+            recorder.send(Record::Operator {
+                t: f64::from(i) * 0.1,
+                command: "hold".into(),
+            });
+        }
+        let stats = recorder.finish().unwrap();
+        assert_eq!(stats.dropped, 0);
+        let bytes = std::fs::read(&path).unwrap();
+        let (mut colour, mut other) = (0, 0);
+        for m in mcap::MessageStream::new(&bytes).unwrap() {
+            let topic = m.unwrap().channel.topic.clone();
+            if topic.ends_with("/camera/color") {
+                colour += 1;
+            } else if !topic.contains("camera") {
+                other += 1;
+            }
+        }
+        std::fs::remove_dir_all(&dir).ok();
+        (colour, other)
+    }
+
+    #[test]
+    fn the_camera_log_rate_thins_camera_frames_and_nothing_else() {
+        let (all, others) = camera_messages(None);
+        assert_eq!(all, 60);
+        // 2 Hz of a 10 Hz camera: every fifth frame, 6 in 3 s, per drone.
+        let (thinned, others_thinned) = camera_messages(Some(2.0));
+        assert_eq!(thinned, 12);
+        let (none, others_none) = camera_messages(Some(0.0));
+        assert_eq!(none, 0);
+        assert!(others >= 30, "{others}");
+        assert_eq!(others_thinned, others);
+        assert_eq!(others_none, others);
+        let dir = std::env::temp_dir().join(format!("gcs-record-bad-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let e = Recorder::create(&dir.join("m.mcap"), Some(-1.0))
+            .err()
+            .unwrap();
+        assert!(e.to_string().contains("must be 0 or more"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
     }
 }

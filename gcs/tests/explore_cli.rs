@@ -300,6 +300,10 @@ fn bad_explore_arguments_are_refused_before_anything_starts() {
         (vec!["explore", "--drones", "0"], "must be 1 to 8"),
         (vec!["explore", "--speed", "100"], "between 0.1 and 20"),
         (
+            vec!["explore", "--log-camera-hz=-2"],
+            "must be 0 (no frames) or more",
+        ),
+        (
             vec!["explore", "--flight-time", "0.5"],
             "between 1 and 600 minutes",
         ),

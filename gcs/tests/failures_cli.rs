@@ -111,3 +111,82 @@ fn gcs_explore_accepts_connections_on_loopback_only() {
     );
     std::fs::remove_dir_all(&out).ok();
 }
+
+#[test]
+fn ctrl_c_lands_every_drone_and_the_outputs_are_still_written() {
+    use std::io::{BufRead, BufReader, Read};
+    let out = std::env::temp_dir().join(format!("gcs-ctrl-c-{}", std::process::id()));
+    let mut station = Command::new(env!("CARGO_BIN_EXE_gcs"))
+        .args([
+            "explore",
+            "--poses",
+            "truth",
+            "--speed",
+            "5",
+            "--timeout",
+            "600",
+            "--no-log",
+            "--json",
+            "--out",
+        ])
+        .arg(&out)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start gcs explore");
+    let stderr = station.stderr.take().expect("stderr");
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            let _ = tx.send(line);
+        }
+    });
+    // Exploring for a while, then the operator presses Ctrl-C.
+    let mut lines = vec![];
+    let until = Instant::now() + Duration::from_secs(120);
+    while Instant::now() < until {
+        let Ok(line) = rx.recv_timeout(Duration::from_secs(1)) else {
+            continue;
+        };
+        lines.push(line);
+        if lines
+            .iter()
+            .filter(|l| l.contains("1: exploring, 2: exploring"))
+            .count()
+            >= 2
+        {
+            break;
+        }
+    }
+    assert!(Instant::now() < until, "never explored: {lines:#?}");
+    let interrupted = Command::new("kill")
+        .args(["-INT", &station.id().to_string()])
+        .status()
+        .expect("kill -INT");
+    assert!(interrupted.success());
+    let ended = eventually(Duration::from_secs(90), || {
+        matches!(station.try_wait(), Ok(Some(_)))
+    });
+    assert!(ended, "gcs explore did not end after Ctrl-C");
+    let status = station.wait().expect("exit status");
+    lines.extend(rx.try_iter());
+    let stderr = lines.join("\n");
+    assert!(status.success(), "{stderr}");
+    assert!(
+        stderr.contains("explore: Ctrl-C: landing every drone"),
+        "{stderr}"
+    );
+    let mut stdout = String::new();
+    station
+        .stdout
+        .take()
+        .expect("stdout")
+        .read_to_string(&mut stdout)
+        .expect("read stdout");
+    let summary: serde_json::Value =
+        serde_json::from_str(stdout.trim()).unwrap_or_else(|e| panic!("{e}: {stdout}"));
+    assert_eq!(summary["completed"], false, "{summary}");
+    assert_eq!(summary["all_landed"], true, "{summary}");
+    assert!(out.join("map.pgm").is_file() && out.join("summary.json").is_file());
+    std::fs::remove_dir_all(&out).ok();
+}

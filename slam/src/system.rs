@@ -1154,6 +1154,18 @@ impl Slam {
         let n = self.nodes.len();
         self.place.add(n, &observation.descriptors);
         let frame_id = self.robots[k].frame;
+        let mut kept = cloud.clone();
+        if frame_id == 0 {
+            self.map.insert(&NodeCloud {
+                node: n,
+                map_from_camera: pose,
+                cloud,
+            });
+            if self.config.known_poses {
+                // Known poses never move: the map never casts this cloud again.
+                kept = Arc::default();
+            }
+        }
         self.nodes.push(Node {
             robot: k,
             stamp: frame.stamp,
@@ -1161,16 +1173,9 @@ impl Slam {
             pose,
             parent,
             observation,
-            cloud: cloud.clone(),
+            cloud: kept,
         });
         self.robots[k].nodes.push(n);
-        if frame_id == 0 {
-            self.map.insert(&NodeCloud {
-                node: n,
-                map_from_camera: pose,
-                cloud,
-            });
-        }
         n
     }
 

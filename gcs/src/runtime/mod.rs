@@ -332,6 +332,18 @@ impl Runtime {
         self.commands.clone()
     }
 
+    /// Makes Ctrl-C land every drone (`who` starts the message); the mission then ends as
+    /// any other does, its outputs written. Pressing it again asks the same.
+    pub fn land_all_on_ctrl_c(&self, who: &'static str) {
+        let commander = self.commander();
+        if let Err(e) = ctrlc::set_handler(move || {
+            eprintln!("{who}: Ctrl-C: landing every drone");
+            let _ = commander.send(Operator::LandAll);
+        }) {
+            tracing::warn!("Ctrl-C will not land the drones: {e}");
+        }
+    }
+
     /// The latest snapshot, at once.
     pub fn snapshot(&self) -> Arc<Snapshot> {
         self.snapshot
