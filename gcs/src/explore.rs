@@ -457,7 +457,7 @@ fn watch(
             );
             writeln!(
                 f,
-                "time_s,drone,phase,slam,true_x,true_y,true_z,true_yaw,flown_x,flown_y,flown_z,flown_yaw,sigma_m"
+                "time_s,drone,phase,slam,true_x,true_y,true_z,true_yaw,flown_x,flown_y,flown_z,flown_yaw,sigma_m,slam_t,slam_x,slam_y"
             )?;
             Some(f)
         }
@@ -478,9 +478,22 @@ fn watch(
                             || ",,,".to_owned(),
                             |e| format!("{:.3},{:.3},{:.3},{:.4}", e[0], e[1], e[2], e[3]),
                         );
+                        // The SLAM's latest body pose, at its frame's time.
+                        let slam = s
+                            .slam
+                            .robots
+                            .get(k)
+                            .and_then(|r| Some((r.stamp, r.map_from_body()?)))
+                            .map_or_else(
+                                || ",,".to_owned(),
+                                |(t, b)| {
+                                    let v = b.translation.vector;
+                                    format!("{t:.2},{:.3},{:.3}", v.x, v.y)
+                                },
+                            );
                         writeln!(
                             f,
-                            "{now:.2},{},{},{},{:.3},{:.3},{:.3},{:.4},{flown},{:.3}",
+                            "{now:.2},{},{},{},{:.3},{:.3},{:.3},{:.4},{flown},{:.3},{slam}",
                             k + 1,
                             d.phase.name(),
                             d.slam.name(),
