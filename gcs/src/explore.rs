@@ -156,6 +156,10 @@ pub struct Summary {
     pub outcome: String,
     /// Simulated seconds from the start to the last drone down.
     pub exploration_time_s: f64,
+    /// Frontiers left at the end that no drone could reach on the map.
+    pub frontiers_out_of_reach: usize,
+    /// Frontier goals given up for good.
+    pub goals_given_up: usize,
     /// Fraction of the free space reachable from the starts that the map knows as free.
     pub coverage: f64,
     /// How far the map's walls lie from the world's.
@@ -584,6 +588,8 @@ fn watch(
         completed,
         outcome: report.outcome.map_or("stopped", Outcome::name).into(),
         exploration_time_s: report.mission_time_s,
+        frontiers_out_of_reach: report.frontiers_out_of_reach,
+        goals_given_up: report.goals_given_up,
         coverage: grid
             .as_ref()
             .map_or(0.0, |g| coverage(&reachable, world, g)),

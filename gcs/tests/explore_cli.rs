@@ -210,6 +210,12 @@ fn two_drones_on_slam_poses_over_the_shield_protocol_map_and_land_safely() {
     assert_eq!(summary["link"], "shield", "{summary}");
     assert_eq!(summary["all_landed"], true, "{summary}");
     assert!(number(&summary["keyframes"]) > 50.0, "{summary}");
+    // A mission that ends "completed" short of the whole building says what stopped it.
+    let left = number(&summary["frontiers_out_of_reach"]) + number(&summary["goals_given_up"]);
+    assert!(left.is_finite(), "{summary}");
+    if summary["completed"] == true && number(&summary["coverage"]) < 0.9 {
+        assert!(left > 0.0, "{summary}");
+    }
     assert!(number(&summary["wall_error"]["cells"]) > 100.0, "{summary}");
     assert!(
         number(&summary["wall_error"]["within_0_1_m"]) >= 0.8,

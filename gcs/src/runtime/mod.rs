@@ -228,6 +228,11 @@ pub struct MissionReport {
     pub outcome: Option<Outcome>,
     /// Seconds from the start to the last drone down.
     pub mission_time_s: f64,
+    /// Frontiers the map still had at the last plan that no drone could reach (a mission
+    /// "completed" with some left ended on what its map let it fly to).
+    pub frontiers_out_of_reach: usize,
+    /// Frontier goals given up for good (reached while the frontier stayed, or no progress).
+    pub goals_given_up: usize,
     /// Per drone: name, final phase, distance flown by the filter, filter trajectory.
     pub drones: Vec<DroneReport>,
     /// The SLAM and what it saw.
@@ -505,6 +510,8 @@ impl Mission {
         MissionReport {
             outcome,
             mission_time_s: self.started.map_or(0.0, |s| end - s),
+            frontiers_out_of_reach: self.frontiers.len(),
+            goals_given_up: self.blacklist.len(),
             drones: self
                 .drones
                 .iter()
@@ -772,7 +779,11 @@ impl Mission {
         if plan.complete && all_valid && airborne && elapsed > self.config.min_mission_s {
             self.say(
                 now,
-                format!("no reachable frontier left after {elapsed:.0} s: landing"),
+                format!(
+                    "no reachable frontier left after {elapsed:.0} s ({} out of reach, {} goals given up): landing",
+                    self.frontiers.len(),
+                    self.blacklist.len()
+                ),
             );
             self.finish(Outcome::Completed);
         }
