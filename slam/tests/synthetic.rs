@@ -238,9 +238,9 @@ fn a_drone_turning_on_the_spot_is_tracked_and_closes_its_loop() {
 
 #[test]
 fn mapping_with_known_poses_adds_no_keyframes_where_one_already_holds_the_view() {
-    // Two drones hovering side by side turn on the spot, then each turns twice more: the later
-    // turns see what the first one's keyframes already hold, so the SLAM's memory stops growing
-    // (an hour of exploration flies mostly through mapped space).
+    // A drone turns on the spot, then twice more: the later turns see what the first one's
+    // keyframes already hold, so the SLAM's memory stops growing (an hour of exploration flies
+    // mostly through mapped space).
     let config = SlamConfig {
         known_poses: true,
         ..SlamConfig::default()
