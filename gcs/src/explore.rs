@@ -656,10 +656,16 @@ fn watch(
     } else {
         println!(
             "{} in {:.0} s simulated: coverage {:.1} %, walls within 0.1 m: {}, {} collision(s), {}; outputs in {}",
-            if summary.completed {
-                "explored"
-            } else {
-                "not finished"
+            match (
+                summary.completed,
+                summary.frontiers_out_of_reach + summary.goals_given_up
+            ) {
+                (true, 0) => "explored".to_owned(),
+                (true, _) => format!(
+                    "explored as far as the map reaches ({} frontier(s) out of reach, {} goal(s) given up)",
+                    summary.frontiers_out_of_reach, summary.goals_given_up
+                ),
+                (false, _) => "not finished".to_owned(),
             },
             summary.exploration_time_s,
             summary.coverage * 100.0,
