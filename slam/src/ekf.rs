@@ -252,15 +252,14 @@ impl Ekf {
     fn record(&mut self, op: Op) {
         let after = matches!(op, Op::Predict(_)).then(|| Box::new(self.snapshot()));
         self.journal.push_back(Entry { op, after });
+        // Kept: from the last prediction more than two seconds old (a base to replay from).
         let oldest = self.t - 2.0;
-        while self.journal.len() > 1
-            && self
-                .journal
-                .get(1)
-                .and_then(|e| e.after.as_ref())
-                .is_some_and(|a| a.t < oldest)
+        if let Some(i) = self
+            .journal
+            .iter()
+            .rposition(|e| e.after.as_ref().is_some_and(|a| a.t < oldest))
         {
-            self.journal.pop_front();
+            self.journal.drain(..i);
         }
     }
 
@@ -808,6 +807,37 @@ mod tests {
         assert!(lowest > 0.9, "swung to {lowest:.3}");
         assert!(late_error < 0.01, "still {late_error:.3} m off after 1.3 s");
         assert_eq!(ekf.outliers(), 0);
+    }
+
+    #[test]
+    fn the_journal_keeps_two_seconds() {
+        // A control loop's calls at 10 Hz for ten minutes, with fixes 0.3 s late.
+        let mut ekf = Ekf::new(EkfConfig::default(), 0.0, [1.0, 1.0, 1.0], 0.0);
+        ekf.update_slam(0.0, [1.0, 1.0, 1.0], 0.0);
+        let mut longest = 0;
+        for k in 1..=6000 {
+            let t = k as f64 * 0.1;
+            ekf.predict(t);
+            ekf.update_heading(t, 0.0);
+            ekf.update_attitude(t, 0.0, 0.0);
+            ekf.update_height(t, 1.0);
+            ekf.set_input(Input::default());
+            ekf.update_slam(t - 0.3, [1.0, 1.0, 1.0], 0.0);
+            longest = longest.max(ekf.journal.len());
+        }
+        // Seven calls a tick (a replayed fix splits a prediction in two), 2 s of ticks and the
+        // base before them.
+        assert!(longest <= 7 * 22, "{longest} entries");
+        let base = ekf
+            .journal
+            .front()
+            .and_then(|e| e.after.as_ref())
+            .expect("a base");
+        assert!(
+            (ekf.time() - base.t - 2.0).abs() <= 0.11,
+            "base at {}",
+            base.t
+        );
     }
 
     #[test]
