@@ -1000,10 +1000,22 @@ impl Slam {
                 ) {
                     Ok(reg) if reg.inliers >= self.config.relocalisation_min_inliers => {
                         let pose = self.nodes[n].pose * reg.reference_from_frame;
-                        // A registration far from a good prediction is a wrong match.
+                        // A registration far from a good prediction is a wrong match. While
+                        // tracking, the prediction is the last frame's motion carried on: a
+                        // match implying more motion than a frame allows is as implausible
+                        // here as against the reference (seen: a one-frame jump of 1 m taken
+                        // from a look-alike keyframe became a keyframe and bent the walls).
+                        let (max_t, max_r) = if tracking {
+                            (
+                                self.config.max_frame_translation,
+                                self.config.max_frame_rotation,
+                            )
+                        } else {
+                            (1.0, 0.6)
+                        };
                         let near_prediction = predicted.is_none_or(|p| {
                             let d = p.inverse() * pose;
-                            d.translation.vector.norm() < 1.0 && d.rotation.angle() < 0.6
+                            d.translation.vector.norm() < max_t && d.rotation.angle() < max_r
                         });
                         match self.height_disagreement(frame, &pose) {
                             None if near_prediction => {
