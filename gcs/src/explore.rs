@@ -26,7 +26,7 @@ use gcs::outputs;
 use gcs::record::{Record, Recorder, Setup, SetupDrone};
 use gcs::runtime::{MissionState, Operator, Outcome, Runtime, RuntimeConfig};
 
-use crate::gui_cmd::{Window, WindowArgs, beside_window};
+use crate::gui_cmd::{LogArgs, Window, WindowArgs, beside_window};
 
 /// The simulated fleet, as `gcs explore` and `gcs gui` take it.
 #[derive(Args, Debug, Clone)]
@@ -74,14 +74,9 @@ pub struct ExploreArgs {
     /// Print the summary as JSON on stdout (progress still goes to stderr).
     #[arg(long)]
     pub json: bool,
-    /// Do not record the MCAP log and `.tlog`s.
-    #[arg(long)]
-    pub no_log: bool,
-    /// Record camera frames at most this many times a second per drone (0: none); every frame
-    /// by default. Colour and depth at 10 Hz are about 1 MB per drone per second; replay reruns
-    /// the SLAM only on the frames recorded.
-    #[arg(long, value_name = "HZ")]
-    pub log_camera_hz: Option<f64>,
+    /// The mission log.
+    #[command(flatten)]
+    pub log: LogArgs,
     /// Kill drone K's link (1-based) at simulated time T seconds: `K@T` (a fault for tests and
     /// demonstrations; the others must finish the map). The same as `--fault link:K@T`.
     #[arg(long, value_name = "K@T")]
@@ -235,11 +230,7 @@ fn validate(args: &ExploreArgs) -> anyhow::Result<Vec<Fault>> {
             args.sim.flight_time
         );
     }
-    if let Some(hz) = args.log_camera_hz
-        && !(hz.is_finite() && hz >= 0.0)
-    {
-        bail!("--log-camera-hz {hz} must be 0 (no frames) or more");
-    }
+    args.log.validate()?;
     if !(args.timeout.is_finite() && args.timeout > 0.0) {
         bail!(
             "--timeout {} must be a positive number of simulated seconds",
@@ -353,7 +344,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
         speed: args.sim.speed,
         seed: args.sim.seed,
         flight_time_s: args.sim.flight_time * 60.0,
-        tlog_dir: (!args.no_log).then(|| args.out.clone()),
+        tlog_dir: (!args.log.no_log).then(|| args.out.clone()),
     })?;
     eprintln!(
         "explore: world '{}', {} drone(s) over {}, {} assignment, poses from {}, {}× real time",
@@ -364,10 +355,10 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
         args.sim.poses.name(),
         args.sim.speed
     );
-    let recorder = if args.no_log {
+    let recorder = if args.log.no_log {
         None
     } else {
-        let r = Recorder::create(&args.out.join("mission.mcap"), args.log_camera_hz)?;
+        let r = Recorder::create(&args.out.join("mission.mcap"), args.log.log_camera_hz)?;
         let b = sim_body_from_camera();
         r.send(Record::Setup(Setup {
             version: 1,

@@ -30,7 +30,7 @@ use gcs::runtime::perception::CameraFrame;
 use gcs::runtime::{Outcome, Runtime, RuntimeConfig};
 use link::mavlink::KeyStore;
 
-use crate::gui_cmd::{Window, beside_window};
+use crate::gui_cmd::{LogArgs, Window, beside_window};
 
 /// Arguments of `gcs fly`.
 #[derive(Args, Debug, Clone)]
@@ -47,14 +47,9 @@ pub struct FlyArgs {
     /// Print the summary as JSON on stdout.
     #[arg(long)]
     pub json: bool,
-    /// Do not record the MCAP log and `.tlog`s.
-    #[arg(long)]
-    pub no_log: bool,
-    /// Record camera frames at most this many times a second per drone (0: none); every frame
-    /// by default. Colour and depth at 10 Hz are about 1 MB per drone per second; replay reruns
-    /// the SLAM only on the frames recorded.
-    #[arg(long, value_name = "HZ")]
-    pub log_camera_hz: Option<f64>,
+    /// The mission log.
+    #[command(flatten)]
+    pub log: LogArgs,
 }
 
 /// The end of a flight, as written to `summary.json`.
@@ -88,6 +83,7 @@ pub fn run(args: &FlyArgs) -> anyhow::Result<()> {
 pub fn run_with(args: &FlyArgs, window: Option<Window>) -> anyhow::Result<()> {
     let waits = window.as_ref().is_some_and(|w| w.wait_for_start);
     let session = window.as_ref().is_some_and(|w| w.close_ends_session);
+    args.log.validate()?;
     if !(args.timeout.is_finite() && args.timeout > 0.0) {
         bail!(
             "--timeout {} must be a positive number of seconds",
@@ -113,7 +109,7 @@ pub fn run_with(args: &FlyArgs, window: Option<Window>) -> anyhow::Result<()> {
     drop(tx);
     let mut drones = vec![];
     for (k, v) in fleet.iter().enumerate() {
-        let tlog = (!args.no_log && v.kind == LinkKind::Mavlink)
+        let tlog = (!args.log.no_log && v.kind == LinkKind::Mavlink)
             .then(|| args.out.join(format!("drone{}.tlog", k + 1)));
         let signing = match &v.signing_key {
             Some(key) => Some(
@@ -158,10 +154,10 @@ pub fn run_with(args: &FlyArgs, window: Option<Window>) -> anyhow::Result<()> {
             }),
         })
         .collect();
-    let recorder = if args.no_log {
+    let recorder = if args.log.no_log {
         None
     } else {
-        let r = Recorder::create(&args.out.join("mission.mcap"), args.log_camera_hz)?;
+        let r = Recorder::create(&args.out.join("mission.mcap"), args.log.log_camera_hz)?;
         r.send(Record::Setup(Setup {
             version: 1,
             world: None,

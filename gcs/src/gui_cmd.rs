@@ -32,12 +32,9 @@ pub struct GuiArgs {
     /// Where to write the map, trajectories, log and summary when the window closes.
     #[arg(long, default_value = "gui-out")]
     pub out: PathBuf,
-    /// Do not record the MCAP log and `.tlog`s.
-    #[arg(long)]
-    pub no_log: bool,
-    /// Record camera frames at most this many times a second per drone (0: none).
-    #[arg(long, value_name = "HZ")]
-    pub log_camera_hz: Option<f64>,
+    /// The mission log.
+    #[command(flatten)]
+    pub log: LogArgs,
     /// Scripted use of the window.
     #[command(flatten)]
     pub window: WindowArgs,
@@ -110,8 +107,7 @@ pub fn run(args: &GuiArgs) -> anyhow::Result<()> {
                 timeout: args.timeout,
                 out: args.out.clone(),
                 json: false,
-                no_log: args.no_log,
-                log_camera_hz: args.log_camera_hz,
+                log: args.log.clone(),
             },
             Some(window),
         ),
@@ -121,8 +117,7 @@ pub fn run(args: &GuiArgs) -> anyhow::Result<()> {
                 timeout: args.timeout,
                 out: args.out.clone(),
                 json: false,
-                no_log: args.no_log,
-                log_camera_hz: args.log_camera_hz,
+                log: args.log.clone(),
                 kill_link: None,
                 faults: vec![],
                 pose_trace: None,
@@ -131,6 +126,31 @@ pub fn run(args: &GuiArgs) -> anyhow::Result<()> {
             },
             Some(window),
         ),
+    }
+}
+
+/// What a mission records (`gcs explore`, `gcs fly`, `gcs gui`).
+#[derive(Args, Debug, Clone)]
+pub struct LogArgs {
+    /// Do not record the MCAP log and `.tlog`s.
+    #[arg(long)]
+    pub no_log: bool,
+    /// Record camera frames at most this many times a second per drone (0: none); every frame
+    /// by default. Colour and depth at 10 Hz are about 1 MB per drone per second; replay reruns
+    /// the SLAM only on the frames recorded.
+    #[arg(long, value_name = "HZ")]
+    pub log_camera_hz: Option<f64>,
+}
+
+impl LogArgs {
+    /// Refuses impossible values (before anything starts).
+    pub fn validate(&self) -> anyhow::Result<()> {
+        if let Some(hz) = self.log_camera_hz
+            && !(hz.is_finite() && hz >= 0.0)
+        {
+            bail!("--log-camera-hz {hz} must be 0 (no frames) or more");
+        }
+        Ok(())
     }
 }
 

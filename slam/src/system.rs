@@ -519,7 +519,7 @@ pub struct Slam {
     /// Anchoring candidates between two frames: (kept, absorbed) → kept_from_absorbed.
     merge_votes: HashMap<(usize, usize), Vec<Isometry3<f64>>>,
     place: PlaceIndex,
-    /// Mapping with known poses: keyframes by the cell (of the keyframe spacing) their camera
+    /// Mapping with known poses: keyframes by the cell (see [`Slam::view_cell`]) their camera
     /// is in, to find one already holding a view.
     views: HashMap<[i64; 3], Vec<usize>>,
     worker: Option<Worker>,
