@@ -15,7 +15,7 @@ use clap::{Args, ValueEnum};
 use nav::grid::Grid;
 use nav::mission::Strategy;
 use sitl::World;
-use slam::eval::{Alignment, ate};
+use slam::eval::{Alignment, ate, loop_closure_errors};
 use slam::system::{Slam, SlamConfig};
 use slam::trajectory::Stamped;
 
@@ -174,6 +174,11 @@ pub struct Summary {
     pub pose_source: &'static str,
     /// Loop closures in the final graph.
     pub loop_closures: usize,
+    /// Loop closures switched off by the back end's consistency check.
+    pub loop_closures_rejected: usize,
+    /// Loop closures left in the final graph whose measurement is more than 0.2 m or 5° from
+    /// the simulator's truth: look-alike places matched by mistake (`null` on ground truth).
+    pub loop_closures_wrong: Option<usize>,
     /// Keyframes in the final graph.
     pub keyframes: usize,
     /// Per drone.
@@ -595,6 +600,17 @@ fn watch(
             PoseSource::Truth => "ground truth",
         },
         loop_closures: stats.loop_closures,
+        loop_closures_rejected: stats.rejected_loop_closures,
+        loop_closures_wrong: (args.sim.poses == PoseSource::Slam).then(|| {
+            let closures = perception.slam.loop_closures();
+            loop_closure_errors(&closures, &perception.truth, 1e-3)
+                .iter()
+                .zip(&closures)
+                .filter(|&(e, c)| {
+                    c.alive && e.is_some_and(|(t, r)| t > 0.2 || r > 5f64.to_radians())
+                })
+                .count()
+        }),
         keyframes: stats.keyframes,
         drones: (0..args.sim.drones)
             .map(|k| {

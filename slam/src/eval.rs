@@ -3,6 +3,7 @@
 
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
+use crate::system::LoopClosure;
 use crate::trajectory::Stamped;
 
 /// TUM's association rule: every (ground truth, estimate) pair closer in time than
@@ -185,6 +186,37 @@ pub fn rpe(gt: &[Stamped], est: &[Stamped], delta: Delta, max_difference: f64) -
     })
 }
 
+/// How far each loop closure's measured relative pose lies from the true one: (metres,
+/// radians), `None` where `truth` (per robot, camera poses) has no pose within
+/// `max_difference` seconds of a keyframe. A correct closure is off by a registration's error
+/// (centimetres); a look-alike place matched by mistake is off by decimetres or more.
+pub fn loop_closure_errors(
+    closures: &[LoopClosure],
+    truth: &[Vec<Stamped>],
+    max_difference: f64,
+) -> Vec<Option<(f64, f64)>> {
+    let at = |robot: usize, t: f64| {
+        let track = truth.get(robot)?;
+        let i = track.partition_point(|s| s.t < t);
+        [i.checked_sub(1), Some(i)]
+            .into_iter()
+            .flatten()
+            .filter_map(|i| track.get(i))
+            .filter(|s| (s.t - t).abs() <= max_difference)
+            .min_by(|x, y| (x.t - t).abs().total_cmp(&(y.t - t).abs()))
+            .map(|s| s.pose)
+    };
+    closures
+        .iter()
+        .map(|c| {
+            let a = at(c.robots.0, c.stamps.0)?;
+            let b = at(c.robots.1, c.stamps.1)?;
+            let off = (a.inverse() * b).inverse() * c.a_from_b;
+            Some((off.translation.vector.norm(), off.rotation.angle()))
+        })
+        .collect()
+}
+
 /// A pose from translation and rotation, for tests and tools.
 pub fn pose(t: [f64; 3], r: UnitQuaternion<f64>) -> Isometry3<f64> {
     Isometry3::from_parts(Translation3::new(t[0], t[1], t[2]), r)
@@ -255,6 +287,41 @@ mod tests {
         let a = ate(&gt, &scaled, Alignment::Sim3, 0.02).unwrap();
         assert!(a.rmse_m < 1e-9 && (a.scale - 2.0).abs() < 1e-9, "{a:?}");
         assert!(ate(&gt, &scaled, Alignment::Se3, 0.02).unwrap().rmse_m > 0.1);
+    }
+
+    #[test]
+    fn a_loop_closure_is_scored_against_the_true_relative_pose() {
+        // Both robots fly along x, 1 m/s; robot 1 flies 2 m to the side of robot 0.
+        let track = |y: f64| -> Vec<Stamped> {
+            (0..10)
+                .map(|k| Stamped {
+                    t: k as f64,
+                    pose: pose([k as f64, y, 0.0], UnitQuaternion::identity()),
+                })
+                .collect()
+        };
+        let truth = [track(0.0), track(2.0)];
+        let closure = |b_in_a: [f64; 3], stamps: (f64, f64)| LoopClosure {
+            robots: (0, 1),
+            stamps,
+            a_from_b: pose(b_in_a, UnitQuaternion::identity()),
+            alive: true,
+        };
+        // Keyframe at t = 2 (x = 2) and t = 5 (x = 5, y = 2): b lies at (3, 2, 0) in a.
+        let scored = loop_closure_errors(
+            &[
+                closure([3.0, 2.0, 0.0], (2.0, 5.0)),
+                closure([3.0, 1.5, 0.0], (2.0, 5.0)),
+                closure([3.0, 2.0, 0.0], (2.0, 50.0)),
+            ],
+            &truth,
+            0.01,
+        );
+        let (t, r) = scored[0].unwrap();
+        assert!(t < 1e-12 && r < 1e-12);
+        let (t, _) = scored[1].unwrap();
+        assert!((t - 0.5).abs() < 1e-12, "{t}");
+        assert_eq!(scored[2], None, "no truth at t = 50");
     }
 
     #[test]
