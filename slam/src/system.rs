@@ -85,8 +85,9 @@ pub struct SlamConfig {
     /// (`None`: not checked). Measured in SITL (967 closures against the truth): wrong ones
     /// were all 3.8–9.3° off in yaw, right ones under 2.6° (99 %).
     pub loop_max_heading_disagreement: Option<f64>,
-    /// A loop closure that cannot be checked against IMU headings (one of its keyframes was
-    /// taken while turning too fast for the heading to be trusted) needs this many inliers.
+    /// A loop closure between robots with IMUs that cannot be checked against their headings
+    /// (one of its keyframes was taken while turning too fast for the heading to be trusted)
+    /// needs this many inliers. (Cameras without an IMU keep [`SlamConfig::loop_min_inliers`].)
     /// In SITL the wrong closures that escaped the heading check had 26–36 inliers.
     pub loop_min_inliers_unchecked: usize,
     /// Keyframes of other coordinate frames that look alike, verified per keyframe (merging).
@@ -388,8 +389,10 @@ enum HeadingCheck {
     Agrees,
     /// It turns this much more than the headings (radians, signed): a wrong match.
     Disagrees(f64),
-    /// A heading is missing, or the check is off.
-    Unchecked,
+    /// A robot with an IMU had no heading at one of the keyframes (it was turning too fast).
+    Missing,
+    /// The check is off, or a camera has no IMU at all.
+    Unavailable,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -442,6 +445,8 @@ struct Robot {
     stamp: f64,
     frames: usize,
     lost_frames: usize,
+    /// Some frame came with an IMU heading (a vehicle, not a hand-held camera).
+    has_imu: bool,
     /// Every tracked frame: time, reference keyframe, camera relative to it.
     track: Vec<(f64, usize, Isometry3<f64>)>,
 }
@@ -626,6 +631,7 @@ impl Slam {
                     stamp: 0.0,
                     frames: 0,
                     lost_frames: 0,
+                    has_imu: false,
                     track: vec![],
                 }
             })
@@ -792,6 +798,7 @@ impl Slam {
         let robot = &mut self.robots[k];
         robot.frames += 1;
         robot.stamp = frame.stamp;
+        robot.has_imu |= frame.heading.is_some();
         let report = if robot.reference.is_none() {
             self.start(&frame, observation)
         } else {
@@ -1364,7 +1371,7 @@ impl Slam {
                     );
                     continue;
                 }
-                HeadingCheck::Unchecked if reg.inliers < self.config.loop_min_inliers_unchecked => {
+                HeadingCheck::Missing if reg.inliers < self.config.loop_min_inliers_unchecked => {
                     tracing::debug!(
                         from = m,
                         to = n,
@@ -1408,12 +1415,16 @@ impl Slam {
     /// their IMU headings say ([`SlamConfig::loop_max_heading_disagreement`]).
     fn heading_disagreement(&self, m: usize, n: usize, m_from_n: &Isometry3<f64>) -> HeadingCheck {
         let (a, b) = (&self.nodes[m], &self.nodes[n]);
-        let (Some(gate), Some(ha), Some(hb)) = (
-            self.config.loop_max_heading_disagreement,
-            a.heading,
-            b.heading,
-        ) else {
-            return HeadingCheck::Unchecked;
+        let Some(gate) = self.config.loop_max_heading_disagreement else {
+            return HeadingCheck::Unavailable;
+        };
+        let (Some(ha), Some(hb)) = (a.heading, b.heading) else {
+            let imu = self.robots[a.robot].has_imu && self.robots[b.robot].has_imu;
+            return if imu {
+                HeadingCheck::Missing
+            } else {
+                HeadingCheck::Unavailable
+            };
         };
         let camera_from_body =
             |node: &Node| self.robots[node.robot].setup.body_from_camera.inverse();
@@ -1844,5 +1855,36 @@ fn lost(why: String) -> FrameReport {
         keyframe: None,
         loop_closures: 0,
         merged: None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Matrix6;
+
+    #[test]
+    fn a_link_from_a_degenerate_registration_still_holds_every_direction() {
+        // A registration whose Hessian is singular (a bare wall: nothing along it): the link
+        // is still at least as certain as `link_max_sigma` in every direction.
+        let config = SlamConfig::default();
+        let (st, sr) = config.link_max_sigma;
+        let mut slam = Slam::new(
+            config,
+            vec![RobotSetup {
+                body_from_camera: Isometry3::identity(),
+                start: None,
+            }],
+        );
+        let degenerate = Registration {
+            reference_from_frame: Isometry3::identity(),
+            inliers: 30,
+            rms_px: 0.5,
+            information: Some(Matrix6::zeros()),
+        };
+        slam.link(0, 1, &degenerate, LinkKind::Odometry);
+        let info = Matrix6::from_row_slice(&slam.links[0].info);
+        let weakest = info.symmetric_eigenvalues().min();
+        assert!(weakest >= st.powi(-2).min(sr.powi(-2)) * 0.999, "{info}");
     }
 }

@@ -271,17 +271,20 @@ fn a_loop_closure_that_turns_otherwise_than_the_imu_reads_is_refused() {
 
 #[test]
 fn a_loop_closure_with_no_imu_headings_to_check_it_needs_more_inliers() {
-    // The same turn with no headings at all: a closure cannot be checked, so it must be
-    // stronger than usual — here impossibly strong, and none is taken.
+    // The same turn, the IMU's heading missing from half way round (a vehicle turning too fast
+    // for it to be trusted): the closures from the end of the turn to its start cannot be
+    // checked, so they must be stronger than usual — here impossibly strong, and none is taken.
     let run = |needed: usize| {
         let config = SlamConfig {
             loop_min_inliers_unchecked: needed,
             ..SlamConfig::default()
         };
         let mut f = Flight::new(1, &[true], config);
-        f.heading_bias = None;
         let (x, y, yaw) = start_of(&f, 0);
-        f.fly(&[turn(x, y, 1.0, yaw)], 60.0);
+        let route = turn(x, y, 1.0, yaw);
+        f.fly(&[route[..7].to_vec()], 30.0);
+        f.heading_bias = None;
+        f.fly(&[route[7..].to_vec()], 30.0);
         f.slam.finish();
         f.slam.loop_closures()
     };
