@@ -97,6 +97,10 @@ pub struct SlamConfig {
     pub relocalisation_candidates: usize,
     /// A relocalisation needs this many inliers.
     pub relocalisation_min_inliers: usize,
+    /// …and this many on a vehicle (a robot with an IMU) with no prediction to check it against
+    /// (its filter has given up, its heading is not trusted while it turns): in SITL, ones
+    /// with nothing to check them put drones 1.6–7 m from where they were.
+    pub relocalisation_min_inliers_unpredicted: usize,
     /// Guided matching while relocalising searches this far around a point's predicted
     /// position, pixels (the prediction is poorer than while tracking).
     pub relocalisation_search_px: f32,
@@ -163,6 +167,7 @@ impl Default for SlamConfig {
             place_candidates: 2,
             relocalisation_candidates: 6,
             relocalisation_min_inliers: 25,
+            relocalisation_min_inliers_unpredicted: 60,
             relocalisation_search_px: 60.0,
             link_sigma: (0.01, 0.5f64.to_radians()),
             link_information_scale: 0.05,
@@ -1067,7 +1072,13 @@ impl Slam {
                     &wide,
                     seed,
                 ) {
-                    Ok(reg) if reg.inliers >= self.config.relocalisation_min_inliers => {
+                    Ok(reg)
+                        if reg.inliers >= self.config.relocalisation_min_inliers
+                            && (predicted.is_some()
+                                || !self.robots[k].has_imu
+                                || reg.inliers
+                                    >= self.config.relocalisation_min_inliers_unpredicted) =>
+                    {
                         let pose = self.nodes[n].pose * reg.reference_from_frame;
                         // A registration far from a good prediction is a wrong match. While
                         // tracking, the prediction is the last frame's motion carried on: a
