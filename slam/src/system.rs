@@ -111,8 +111,9 @@ pub struct SlamConfig {
     pub link_information_scale: f64,
     /// Every link is at least this certain in every direction (standard deviations: metres,
     /// radians). A registration's Hessian can be nearly singular — a camera up against a bare
-    /// wall constrains nothing along it — and a chain of keyframes behind such a link slid
-    /// metres in one optimisation when a loop pulled on it.
+    /// wall constrains nothing along it — and must not leave a chain of keyframes free to
+    /// slide. (Added while chasing optimisations that moved keyframes metres; it did not stop
+    /// those.)
     pub link_max_sigma: (f64, f64),
     /// Standard deviation of the IMU heading prior, radians (`None`: headings unused).
     pub heading_sigma: Option<f64>,
