@@ -1064,6 +1064,12 @@ impl Slam {
                 search_radius_px: self.config.relocalisation_search_px,
                 ..frontend.clone()
             };
+            // A vehicle with nothing to check a match against needs a stronger one.
+            let needed = if predicted.is_none() && self.robots[k].has_imu {
+                self.config.relocalisation_min_inliers_unpredicted
+            } else {
+                self.config.relocalisation_min_inliers
+            };
             for n in self.relocalisation_candidates(k, &around, &observation) {
                 let guess = predicted.map(|p| self.nodes[n].pose.inverse() * p);
                 match register(
@@ -1073,13 +1079,7 @@ impl Slam {
                     &wide,
                     seed,
                 ) {
-                    Ok(reg)
-                        if reg.inliers >= self.config.relocalisation_min_inliers
-                            && (predicted.is_some()
-                                || !self.robots[k].has_imu
-                                || reg.inliers
-                                    >= self.config.relocalisation_min_inliers_unpredicted) =>
-                    {
+                    Ok(reg) if reg.inliers >= needed => {
                         let pose = self.nodes[n].pose * reg.reference_from_frame;
                         // A registration far from a good prediction is a wrong match. While
                         // tracking, the prediction is the last frame's motion carried on: a
