@@ -576,8 +576,10 @@ fn watch(
     let perception = report
         .perception
         .context("the SLAM thread stopped unexpectedly")?;
-    let voxels = perception.slam.map().snapshot();
-    let grid = voxels.project();
+    // The final map is read in place (a copy of a building's voxels doubled the station's memory
+    // at the end of the soak run).
+    let map = perception.slam.map();
+    let grid = map.project();
     let stats = perception.slam.stats();
     let completed = report.outcome == Some(Outcome::Completed);
     let summary = Summary {
@@ -650,14 +652,16 @@ fn watch(
             )
         })
         .collect();
-    write_outputs(
-        &args.out,
-        &voxels,
-        grid.as_ref(),
-        &truth_tracks,
-        &trajectories,
-        &summary,
-    )?;
+    map.with(|voxels| {
+        write_outputs(
+            &args.out,
+            voxels,
+            grid.as_ref(),
+            &truth_tracks,
+            &trajectories,
+            &summary,
+        )
+    })?;
     if args.json {
         println!("{}", serde_json::to_string(&summary)?);
     } else {

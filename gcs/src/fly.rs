@@ -236,8 +236,8 @@ fn watch(args: &FlyArgs, fleet: &[Vehicle], runtime: Runtime) -> anyhow::Result<
     let perception = report
         .perception
         .context("the SLAM thread stopped unexpectedly")?;
-    let voxels = perception.slam.map().snapshot();
-    if let Some(g) = voxels.project() {
+    let map = perception.slam.map();
+    if let Some(g) = map.project() {
         outputs::write_map(&args.out, &g)?;
         let tracks: Vec<Vec<[f64; 2]>> = report
             .drones
@@ -246,7 +246,7 @@ fn watch(args: &FlyArgs, fleet: &[Vehicle], runtime: Runtime) -> anyhow::Result<
             .collect();
         outputs::write_picture(&args.out.join("map.png"), &g, &tracks)?;
     }
-    outputs::write_ply(&args.out.join("map.ply"), &voxels)?;
+    map.with(|voxels| outputs::write_ply(&args.out.join("map.ply"), voxels))?;
     for k in 0..fleet.len() {
         outputs::write_trajectory(
             &args.out.join(format!("drone{}.tum", k + 1)),

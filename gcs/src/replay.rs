@@ -166,8 +166,7 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<()> {
         }
     }
     slam.finish();
-    let voxels = slam.map().snapshot();
-    let grid = voxels.project();
+    let grid = slam.map().project();
     let stats = slam.stats();
     let report = ReplayReport {
         messages: log.messages,

@@ -30,35 +30,44 @@ pub fn is_frontier_cell(grid: &Grid, (x, y): CellXY) -> bool {
 }
 
 /// The frontiers of an (inflated) map: frontier cells grouped 8-connected, groups smaller than
-/// `min_cells` dropped, largest first.
-pub fn frontiers(grid: &Grid, min_cells: usize) -> Vec<Frontier> {
+/// `min_cells` dropped, groups wider than `max_span_m` cut into pieces of at most that width (on
+/// square tiles; pieces smaller than `min_cells` dropped), largest first.
+///
+/// Cutting keeps every goal on its frontier: the frontier around an open hall is one ring whose
+/// centroid is the hall's middle, where the robots already are (on willow-full two drones "reached"
+/// that goal at once, gave it up and landed with 1.6 % of the building seen); its pieces are
+/// targets of their own, a robot each.
+pub fn frontiers(grid: &Grid, min_cells: usize, max_span_m: f64) -> Vec<Frontier> {
     let (w, h) = (grid.width() as u32, grid.height() as u32);
     let mask = GrayImage::from_fn(w, h, |x, y| {
         Luma([u8::from(is_frontier_cell(grid, (x as usize, y as usize)))])
     });
     let labels = connected_components(&mask, Connectivity::Eight, Luma([0u8]));
-    // label → (cells, sum x, sum y)
-    let mut groups: Vec<(usize, f64, f64)> = Vec::new();
+    // label → the centres of its cells
+    let mut groups: Vec<Vec<[f64; 2]>> = Vec::new();
     for (x, y, Luma([label])) in labels.enumerate_pixels() {
         if *label == 0 {
             continue;
         }
         let k = *label as usize - 1;
         if groups.len() <= k {
-            groups.resize(k + 1, (0, 0.0, 0.0));
+            groups.resize(k + 1, vec![]);
         }
-        let c = grid.center_of((x as usize, y as usize));
-        let g = &mut groups[k];
-        g.0 += 1;
-        g.1 += c[0];
-        g.2 += c[1];
+        groups[k].push(grid.center_of((x as usize, y as usize)));
     }
+    let min_cells = min_cells.max(1);
     let reach = grid.width().max(grid.height());
     let mut out: Vec<Frontier> = groups
         .into_iter()
-        .filter(|g| g.0 >= min_cells.max(1))
-        .filter_map(|(n, sx, sy)| {
-            let centroid = [sx / n as f64, sy / n as f64];
+        .filter(|g| g.len() >= min_cells)
+        .flat_map(|g| pieces(g, max_span_m))
+        .filter(|piece| piece.len() >= min_cells)
+        .filter_map(|piece| {
+            let n = piece.len();
+            let sum = piece
+                .iter()
+                .fold([0.0, 0.0], |s, c| [s[0] + c[0], s[1] + c[1]]);
+            let centroid = [sum[0] / n as f64, sum[1] / n as f64];
             let cell = grid.cell_of(centroid)?;
             let goal = nearest_free(grid, cell, reach)?;
             Some(Frontier {
@@ -72,8 +81,32 @@ pub fn frontiers(grid: &Grid, min_cells: usize) -> Vec<Frontier> {
     out
 }
 
+/// A group of frontier cells (their centres, metres) as is when it fits in `max_span_m` each
+/// way, else cut on square tiles of that side laid from its lower corner.
+fn pieces(cells: Vec<[f64; 2]>, max_span_m: f64) -> Vec<Vec<[f64; 2]>> {
+    let lower = cells
+        .iter()
+        .fold([f64::INFINITY; 2], |m, c| [m[0].min(c[0]), m[1].min(c[1])]);
+    let upper = cells.iter().fold([f64::NEG_INFINITY; 2], |m, c| {
+        [m[0].max(c[0]), m[1].max(c[1])]
+    });
+    let span = (upper[0] - lower[0]).max(upper[1] - lower[1]);
+    if !(max_span_m > 0.0) || span <= max_span_m {
+        return vec![cells];
+    }
+    let mut tiles: std::collections::BTreeMap<(i64, i64), Vec<[f64; 2]>> = Default::default();
+    for c in cells {
+        let tile = (
+            ((c[0] - lower[0]) / max_span_m).floor() as i64,
+            ((c[1] - lower[1]) / max_span_m).floor() as i64,
+        );
+        tiles.entry(tile).or_default().push(c);
+    }
+    tiles.into_values().collect()
+}
+
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::grid::tests::grid;
 
@@ -91,19 +124,67 @@ mod tests {
             "######.###",
             "######?###",
         ]);
-        let all = frontiers(&g, 1);
+        let all = frontiers(&g, 1, 10.0);
         let sizes: Vec<usize> = all.iter().map(|f| f.cells).collect();
         assert_eq!(sizes, vec![4, 3, 1], "{all:?}");
-        let big = frontiers(&g, 2);
+        let big = frontiers(&g, 2, 10.0);
         assert_eq!(big.len(), 2);
         for f in &big {
             assert_eq!(g.get(f.goal), Cell::Free);
         }
     }
 
+    /// An open hall seen from its middle: a free disc of `radius` metres (centre (3, 3)) in
+    /// unknown space, 0.1-m cells.
+    pub(crate) fn open_hall(radius: f64) -> Grid {
+        let mut g = Grid::new(61, 61, 0.1, [0.0, 0.0], Cell::Unknown);
+        for y in 0..61 {
+            for x in 0..61 {
+                let c = g.center_of((x, y));
+                if (c[0] - 3.0).hypot(c[1] - 3.0) <= radius {
+                    g.set((x, y), Cell::Free);
+                }
+            }
+        }
+        g
+    }
+
+    #[test]
+    fn a_ring_frontier_is_cut_into_pieces_each_with_its_goal_on_it() {
+        let g = open_hall(2.5);
+        let from_middle = |f: &Frontier| {
+            let c = g.center_of(f.goal);
+            (c[0] - 3.0).hypot(c[1] - 3.0)
+        };
+        // Uncut, the ring is one frontier whose goal is the hall's middle.
+        let whole = frontiers(&g, 1, 10.0);
+        assert_eq!(whole.len(), 1, "{whole:?}");
+        assert!(from_middle(&whole[0]) < 0.2, "{whole:?}");
+        // Cut at 2 m: pieces of the ring, every goal near the edge, no cell lost.
+        let cut = frontiers(&g, 1, 2.0);
+        assert!(cut.len() >= 8, "{cut:?}");
+        for f in &cut {
+            assert_eq!(g.get(f.goal), Cell::Free);
+            assert!(
+                from_middle(f) > 2.0,
+                "{f:?} is {} m from the middle",
+                from_middle(f)
+            );
+        }
+        let total: usize = cut.iter().map(|f| f.cells).sum();
+        assert_eq!(total, whole[0].cells);
+    }
+
+    #[test]
+    fn a_frontier_narrower_than_the_span_is_not_cut() {
+        let g = open_hall(0.8);
+        assert_eq!(frontiers(&g, 1, 2.0), frontiers(&g, 1, 10.0));
+        assert_eq!(frontiers(&g, 1, 2.0).len(), 1);
+    }
+
     #[test]
     fn a_fully_known_map_has_no_frontier() {
         let g = grid(&["#####", "#...#", "#####"]);
-        assert!(frontiers(&g, 1).is_empty());
+        assert!(frontiers(&g, 1, 10.0).is_empty());
     }
 }

@@ -25,6 +25,9 @@ pub struct PlannerConfig {
     pub robot_radius_m: f64,
     /// Frontiers with fewer cells are ignored.
     pub min_frontier_cells: usize,
+    /// Frontiers wider than this (metres) are cut into pieces, each a target of its own (about
+    /// the camera's range: from a piece's goal the robot sees all of it).
+    pub max_frontier_span_m: f64,
     /// Assignment strategy.
     pub strategy: Strategy,
     /// Frontiers whose goal lies within `blacklist_radius_m` of one of these points are ignored
@@ -40,6 +43,7 @@ impl Default for PlannerConfig {
         Self {
             robot_radius_m: 0.3,
             min_frontier_cells: 5,
+            max_frontier_span_m: 4.0,
             strategy: Strategy::Hungarian,
             blacklist: vec![],
             blacklist_radius_m: 0.5,
@@ -129,16 +133,20 @@ pub fn plan(
         })
         .collect::<Result<Vec<Option<CellXY>>, _>>()?;
     let inflated = inflate(map, config.robot_radius_m);
-    let frontiers: Vec<Frontier> = frontiers(&inflated, config.min_frontier_cells)
-        .into_iter()
-        .filter(|f| {
-            let g = inflated.center_of(f.goal);
-            config
-                .blacklist
-                .iter()
-                .all(|b| (b[0] - g[0]).hypot(b[1] - g[1]) > config.blacklist_radius_m)
-        })
-        .collect();
+    let frontiers: Vec<Frontier> = frontiers(
+        &inflated,
+        config.min_frontier_cells,
+        config.max_frontier_span_m,
+    )
+    .into_iter()
+    .filter(|f| {
+        let g = inflated.center_of(f.goal);
+        config
+            .blacklist
+            .iter()
+            .all(|b| (b[0] - g[0]).hypot(b[1] - g[1]) > config.blacklist_radius_m)
+    })
+    .collect();
     // A robot inside the inflated band around a wall starts from the nearest free cell.
     let reach = (config.robot_radius_m / map.resolution()).ceil() as usize * 2 + 2;
     let graph = Graph::new(&inflated);
@@ -421,6 +429,27 @@ mod tests {
                 .all(|&c| (c - (largest + 10.0)).abs() < 1e-9)
         );
         assert!(p.robots[1].frontier.is_some());
+    }
+
+    #[test]
+    fn two_robots_in_the_middle_of_an_open_hall_fly_to_two_sides_of_it() {
+        // The hall's frontier is one ring around them; before it was cut into pieces both were
+        // sent to its centroid, where they already were.
+        let hall = crate::frontier::tests::open_hall(2.5);
+        let p = plan(&hall, &[Some([2.8, 3.0]), Some([3.2, 3.0])], &toy_config()).unwrap();
+        let goals: Vec<[f64; 2]> = p
+            .robots
+            .iter()
+            .map(|r| p.frontiers[r.frontier.expect("a frontier for each robot")].centroid)
+            .collect();
+        // Pieces up to 4 m wide of a 5-m ring: arcs whose centroids lie 1.6 m or more out.
+        for g in &goals {
+            assert!((g[0] - 3.0).hypot(g[1] - 3.0) > 1.5, "{goals:?}");
+        }
+        assert!(
+            (goals[0][0] - goals[1][0]).hypot(goals[0][1] - goals[1][1]) > 1.0,
+            "{goals:?}"
+        );
     }
 
     #[test]

@@ -41,11 +41,6 @@ impl MapHandle {
     pub fn with<R>(&self, f: impl FnOnce(&VoxelMap) -> R) -> R {
         f(&self.lock())
     }
-
-    /// A copy of the live map.
-    pub fn snapshot(&self) -> VoxelMap {
-        self.lock().clone()
-    }
 }
 
 struct Rebuild {

@@ -490,17 +490,14 @@ impl Mission {
         let perception = self.perception.take().and_then(Perception::finish);
         if let (Some(r), Some(p)) = (&self.recorder, &perception) {
             // The final map, after the last optimisation: the 2D grid and the 3D voxels.
-            let voxels = p.slam.map().snapshot();
-            if let Some(grid) = voxels.project() {
+            let (grid, points) = p.slam.map().with(|v| (v.project(), v.occupied()));
+            if let Some(grid) = grid {
                 r.send(Record::Grid {
                     t: end,
                     grid: Arc::new(grid),
                 });
             }
-            r.send(Record::Cloud {
-                t: end,
-                points: voxels.occupied(),
-            });
+            r.send(Record::Cloud { t: end, points });
         }
         if let Some(r) = &mut self.recorder {
             // Close the log with the mission; the recorder's owner reads (and reports) the
