@@ -91,7 +91,7 @@ fn pieces(cells: Vec<[f64; 2]>, max_span_m: f64) -> Vec<Vec<[f64; 2]>> {
         [m[0].max(c[0]), m[1].max(c[1])]
     });
     let span = (upper[0] - lower[0]).max(upper[1] - lower[1]);
-    if !(max_span_m > 0.0) || span <= max_span_m {
+    if max_span_m.is_nan() || max_span_m <= 0.0 || span <= max_span_m {
         return vec![cells];
     }
     let mut tiles: std::collections::BTreeMap<(i64, i64), Vec<[f64; 2]>> = Default::default();
