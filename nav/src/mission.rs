@@ -5,9 +5,7 @@ use crate::assignment::{greedy, hungarian};
 use crate::frontier::{Frontier, frontiers};
 use crate::grid::{Cell, CellXY, Grid};
 use crate::inflate::inflate;
-use crate::search::{
-    DistanceField, Graph, UNREACHABLE, astar, dijkstra, metres, nearest_free, simplify,
-};
+use crate::search::{Graph, UNREACHABLE, astar, dijkstra, metres, nearest_free, simplify};
 
 /// How robots are matched to frontiers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -154,15 +152,17 @@ pub fn plan(
         .iter()
         .map(|s| s.and_then(|c| nearest_free(&inflated, c, reach)))
         .collect();
-    let fields = search_all(&graph, &origins);
-    let raw: Vec<Vec<Option<f64>>> = fields
+    let goals: Vec<CellXY> = frontiers.iter().map(|f| f.goal).collect();
+    let reached = search_all(&graph, &origins, &goals);
+    // Robots × frontiers, metres; `None` where unreachable (a whole row for a robot without a
+    // start).
+    let raw: Vec<Vec<Option<f64>>> = reached
         .iter()
-        .map(|f| {
-            frontiers
-                .iter()
-                .map(|fr| {
-                    f.as_ref()
-                        .map(|f| f.cost(fr.goal))
+        .map(|row| {
+            (0..goals.len())
+                .map(|f| {
+                    row.as_ref()
+                        .map(|r| r[f])
                         .filter(|&c| c != UNREACHABLE)
                         .map(|c| metres(&inflated, c))
                 })
@@ -172,7 +172,7 @@ pub fn plan(
     let largest = raw.iter().flatten().flatten().copied().fold(0.0, f64::max);
     let costs: Vec<Vec<f64>> = raw
         .iter()
-        .zip(&fields)
+        .zip(&reached)
         .map(|(row, f)| {
             row.iter()
                 .map(|c| {
@@ -204,7 +204,7 @@ pub fn plan(
     };
     let robots_out = (0..robots.len())
         .map(|r| {
-            let Some(field) = &fields[r] else {
+            let Some(origin) = origins[r] else {
                 return hover(if starts[r].is_none() {
                     "pose invalid"
                 } else {
@@ -218,7 +218,12 @@ pub fn plan(
                     "no frontier left for this robot"
                 });
             };
-            let (Some(cost), Some(cells)) = (raw[r][f], field.path_to(frontiers[f].goal)) else {
+            // The path by A* (the same cost as the search's): the searches keep only their costs
+            // to the goals, not a field over the whole map per robot (8 bytes a cell: on a
+            // 135 × 147 m building eight drones' fields were 0.5 GB).
+            let (Some(cost), Some((_, cells))) =
+                (raw[r][f], astar(&inflated, origin, frontiers[f].goal))
+            else {
                 return hover("assigned frontier unreachable");
             };
             let path = simplify(&inflated, &cells)
@@ -233,7 +238,7 @@ pub fn plan(
             }
         })
         .collect();
-    let any_valid = fields.iter().any(Option::is_some);
+    let any_valid = reached.iter().any(Option::is_some);
     let reachable = raw.iter().flatten().any(Option::is_some);
     Ok(Plan {
         inflated,
@@ -267,8 +272,14 @@ pub fn route(
     )
 }
 
-/// One Dijkstra per robot, spread over the available cores.
-fn search_all(graph: &Graph, origins: &[Option<CellXY>]) -> Vec<Option<DistanceField>> {
+/// One Dijkstra per robot, spread over the available cores: each robot's cost to every goal
+/// ([`UNREACHABLE`] where there is no path), `None` for a robot without an origin. A field is
+/// dropped as soon as its costs are read, so a core holds one at a time.
+fn search_all(
+    graph: &Graph,
+    origins: &[Option<CellXY>],
+    goals: &[CellXY],
+) -> Vec<Option<Vec<u32>>> {
     let threads = std::thread::available_parallelism()
         .map_or(1, |n| n.get())
         .min(origins.len().max(1));
@@ -279,7 +290,12 @@ fn search_all(graph: &Graph, origins: &[Option<CellXY>]) -> Vec<Option<DistanceF
             .map(|part| {
                 scope.spawn(move || {
                     part.iter()
-                        .map(|o| o.map(|c| graph.dijkstra(c)))
+                        .map(|o| {
+                            o.map(|c| {
+                                let field = graph.dijkstra(c);
+                                goals.iter().map(|&g| field.cost(g)).collect()
+                            })
+                        })
                         .collect::<Vec<_>>()
                 })
             })
