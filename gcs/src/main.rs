@@ -13,6 +13,11 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+/// mimalloc instead of glibc's allocator: glibc's per-thread arenas kept freed memory, so the
+/// eight-drone soak run's station held 1.29 GB with 0.50 GB in use (`malloc_stats`).
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 /// Ground control station for cooperative multi-drone exploration.
 #[derive(Parser)]
 #[command(
