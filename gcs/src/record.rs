@@ -22,7 +22,7 @@ use std::time::{Duration, Instant};
 use foxglove::Encode;
 use foxglove::messages::{
     CameraCalibration, CompressedImage, FrameTransform, Grid as FoxGrid, Log, PackedElementField,
-    PointCloud, Pose, PoseInFrame, Quaternion, Timestamp, Vector2, Vector3,
+    PointCloud, Pose, PoseInFrame, Quaternion, Timestamp, Vector2, Vector3, log::Level,
     packed_element_field::NumericType,
 };
 use link::camera::RgbdFrame;
@@ -158,6 +158,15 @@ pub enum Record {
         goals: Vec<(usize, Option<[f64; 2]>)>,
         /// The frontiers' goal points.
         frontiers: Vec<[f64; 2]>,
+    },
+    /// A text message from a vehicle (MAVLink `STATUSTEXT`, the shield's reports).
+    VehicleText {
+        /// Mission clock, seconds.
+        t: f64,
+        /// The drone.
+        drone: usize,
+        /// The message.
+        text: link::StatusText,
     },
     /// An operator command.
     Operator {
@@ -705,11 +714,24 @@ fn write_record(w: &mut McapWriter, ch: &mut Channels, r: &Record) -> Result<u64
             )?;
             Ok(1)
         }
+        Record::VehicleText { t, drone, text } => {
+            let c = ch.foxglove::<Log>(w, &format!("/drone{}/status", drone + 1))?;
+            let m = Log {
+                timestamp: stamp(*t),
+                level: log_level(text.severity) as i32,
+                message: text.text.clone(),
+                name: format!("drone{}", drone + 1),
+                file: String::new(),
+                line: 0,
+            };
+            ch.write(w, c, *t, &encode(&m)?)?;
+            Ok(1)
+        }
         Record::Operator { t, command } => {
             let c = ch.foxglove::<Log>(w, "/operator")?;
             let m = Log {
                 timestamp: stamp(*t),
-                level: 2,
+                level: Level::Info as i32,
                 message: command.clone(),
                 name: "operator".into(),
                 file: String::new(),
@@ -718,6 +740,17 @@ fn write_record(w: &mut McapWriter, ch: &mut Channels, r: &Record) -> Result<u64
             ch.write(w, c, *t, &encode(&m)?)?;
             Ok(1)
         }
+    }
+}
+
+/// Foxglove's log level of a syslog (MAVLink `MAV_SEVERITY`) severity.
+fn log_level(severity: u8) -> Level {
+    match severity {
+        0..=2 => Level::Fatal, // emergency, alert, critical
+        3 => Level::Error,
+        4 => Level::Warning,
+        5 | 6 => Level::Info, // notice, info
+        _ => Level::Debug,
     }
 }
 
@@ -782,6 +815,19 @@ mod tests {
         }
         std::fs::remove_dir_all(&dir).ok();
         (colour, other)
+    }
+
+    #[test]
+    fn vehicle_severities_keep_their_rank_as_log_levels() {
+        // ArduPilot's "GCS Failsafe: landing" is critical, "RC override timed out" a warning,
+        // "Arming motors" info.
+        assert_eq!(log_level(2), Level::Fatal);
+        assert_eq!(log_level(3), Level::Error);
+        assert_eq!(log_level(4), Level::Warning);
+        assert_eq!(log_level(5), Level::Info);
+        assert_eq!(log_level(6), Level::Info);
+        assert_eq!(log_level(7), Level::Debug);
+        assert_eq!(log_level(200), Level::Debug);
     }
 
     #[test]

@@ -89,8 +89,12 @@ fn two_drones_explore_the_default_world_land_and_write_their_outputs() {
         assert!(number(&d["rc_gap_p99_ms"]) <= 200.0, "{d}");
         assert!(number(&d["rc_gap_max_ms"]) <= 1000.0, "{d}");
     }
-    // Progress went to stderr while it ran.
+    // Progress went to stderr while it ran, and what the vehicles said.
     assert!(stderr.contains("coverage"), "{stderr}");
+    assert!(
+        stderr.contains("drone 2 (vehicle): Arming motors"),
+        "{stderr}"
+    );
     // The same summary is on disk; the map loads as a map_server map and knows the apartment's
     // free space; the trajectories are TUM files; the 3D map is a PLY.
     let on_disk: serde_json::Value = serde_json::from_str(
@@ -129,6 +133,9 @@ fn two_drones_explore_the_default_world_land_and_write_their_outputs() {
         ("/plan", "gcs.Plan"),
         ("/setup", "gcs.Setup"),
         ("/drone2/camera/truth", "foxglove.PoseInFrame"),
+        // What the autopilots said ("Arming motors").
+        ("/drone1/status", "foxglove.Log"),
+        ("/drone2/status", "foxglove.Log"),
     ] {
         assert_eq!(
             topics.get(topic).map(String::as_str),

@@ -188,6 +188,16 @@ pub struct StatusText {
     pub text: String,
 }
 
+impl StatusText {
+    /// The severity of a warning (MAVLink's `MAV_SEVERITY_WARNING`); lower is worse.
+    pub const WARNING: u8 = 4;
+
+    /// True for a warning or worse: what the operator must not miss.
+    pub fn is_warning(&self) -> bool {
+        self.severity <= Self::WARNING
+    }
+}
+
 /// Link health for displays and failsafes.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LinkStatus {

@@ -273,7 +273,6 @@ impl Drone {
     }
 
     fn say(&mut self, text: String) {
-        tracing::info!(drone = self.id + 1, "{text}");
         self.messages.push(text);
     }
 

@@ -525,6 +525,11 @@ impl Mission {
 
     fn say(&mut self, now: f64, text: String) {
         tracing::info!("{text}");
+        self.note(now, text);
+    }
+
+    /// Keeps a message for the operator (the last 50), already logged.
+    fn note(&mut self, now: f64, text: String) {
         self.messages.push((now, text));
         if self.messages.len() > 50 {
             self.messages.remove(0);
@@ -643,6 +648,23 @@ impl Mission {
             let name = self.drones[k].name.clone();
             for m in messages {
                 self.say(now, format!("{name}: {m}"));
+            }
+            // What the vehicle itself says (ArduPilot's "PreArm: …", a failsafe, a collision in
+            // the simulator), as QGroundControl and MAVProxy show it.
+            for text in self.drones[k].link.take_status_texts() {
+                if text.is_warning() {
+                    tracing::warn!("{name} (vehicle): {}", text.text);
+                } else {
+                    tracing::info!("{name} (vehicle): {}", text.text);
+                }
+                if let Some(r) = &self.recorder {
+                    r.send(Record::VehicleText {
+                        t: now,
+                        drone: k,
+                        text: text.clone(),
+                    });
+                }
+                self.note(now, format!("{name} (vehicle): {}", text.text));
             }
         }
         if let Some(started) = self.started
