@@ -972,7 +972,7 @@ fn handle_frame(shared: &Shared, frame: &RawFrame, now: Instant) {
             let text = String::from_utf8_lossy(&st.text[..])
                 .trim_end_matches('\0')
                 .to_owned();
-            tracing::info!("system {sys}: {text}");
+            tracing::debug!("system {sys}: {text}");
             let queue = s.early_texts.entry(sys).or_default();
             queue.push(StatusText {
                 severity: st.severity as u8,
@@ -1038,7 +1038,7 @@ fn handle_frame(shared: &Shared, frame: &RawFrame, now: Instant) {
             let text = String::from_utf8_lossy(&st.text[..])
                 .trim_end_matches('\0')
                 .to_owned();
-            tracing::info!("vehicle {sys}: {text}");
+            tracing::debug!("vehicle {sys}: {text}");
             v.texts.push(StatusText {
                 severity: st.severity as u8,
                 text,

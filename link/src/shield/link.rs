@@ -327,7 +327,7 @@ fn apply(s: &mut State, frame: UpRepr, now: Duration) {
             }
         }
         UpRepr::Text(text) => {
-            tracing::info!("shield: {text}");
+            tracing::debug!("shield: {text}");
             s.texts.push(StatusText { severity: 4, text });
         }
     }
