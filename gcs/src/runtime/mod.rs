@@ -652,19 +652,20 @@ impl Mission {
             // What the vehicle itself says (ArduPilot's "PreArm: …", a failsafe, a collision in
             // the simulator), as QGroundControl and MAVProxy show it.
             for text in self.drones[k].link.take_status_texts() {
+                let line = format!("{name} (vehicle): {}", text.text);
                 if text.is_warning() {
-                    tracing::warn!("{name} (vehicle): {}", text.text);
+                    tracing::warn!("{line}");
                 } else {
-                    tracing::info!("{name} (vehicle): {}", text.text);
+                    tracing::info!("{line}");
                 }
                 if let Some(r) = &self.recorder {
                     r.send(Record::VehicleText {
                         t: now,
                         drone: k,
-                        text: text.clone(),
+                        text,
                     });
                 }
-                self.note(now, format!("{name} (vehicle): {}", text.text));
+                self.note(now, line);
             }
         }
         if let Some(started) = self.started
