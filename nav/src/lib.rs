@@ -11,6 +11,7 @@ pub mod local;
 pub mod mission;
 pub mod render;
 pub mod search;
+pub mod vantage;
 
 pub use grid::{Cell, CellXY, Grid, MapError};
 pub use mission::{Plan, PlanError, PlannerConfig, RobotPlan, Strategy, explored_part, plan};

@@ -6,6 +6,7 @@ use crate::frontier::{Frontier, frontiers};
 use crate::grid::{Cell, CellXY, Grid};
 use crate::inflate::inflate;
 use crate::search::{Graph, UNREACHABLE, astar, dijkstra, metres, nearest_free, simplify};
+use crate::vantage::vantage;
 
 /// How robots are matched to frontiers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -34,6 +35,11 @@ pub struct PlannerConfig {
     pub blacklist: Vec<[f64; 2]>,
     /// Radius around blacklisted points, metres.
     pub blacklist_radius_m: f64,
+    /// A robot looks around from a cell with this much room on every side (the camera's minimum
+    /// range and its offset from the body, with a margin), metres: see [`crate::vantage`].
+    pub look_around_room_m: f64,
+    /// ... found at most this far from its frontier's goal, metres.
+    pub look_around_shift_m: f64,
 }
 
 impl Default for PlannerConfig {
@@ -45,6 +51,8 @@ impl Default for PlannerConfig {
             strategy: Strategy::Hungarian,
             blacklist: vec![],
             blacklist_radius_m: 0.5,
+            look_around_room_m: 0.7,
+            look_around_shift_m: 1.5,
         }
     }
 }
@@ -56,7 +64,10 @@ pub struct RobotPlan {
     pub frontier: Option<usize>,
     /// Path length to it, metres.
     pub cost_m: Option<f64>,
-    /// Waypoints from the robot to the target, map frame, metres (straight segments).
+    /// Its frontier's goal, map frame, metres (what is given up if the frontier stays).
+    pub goal: Option<[f64; 2]>,
+    /// Waypoints from the robot to where it looks around (its vantage, near the goal), map
+    /// frame, metres (straight segments).
     pub path: Vec<[f64; 2]>,
     /// Why it hovers, when it does.
     pub hover_reason: Option<&'static str>,
@@ -221,8 +232,15 @@ pub fn plan(
             // The path by A* (the same cost as the search's): the searches keep only their costs
             // to the goals, not a field over the whole map per robot (8 bytes a cell: on a
             // 135 × 147 m building eight drones' fields were 0.5 GB).
-            let (Some(cost), Some((_, cells))) =
-                (raw[r][f], astar(&inflated, origin, frontiers[f].goal))
+            let goal = frontiers[f].goal;
+            let look_from = vantage(
+                map,
+                &inflated,
+                goal,
+                config.look_around_room_m,
+                config.look_around_shift_m,
+            );
+            let (Some(cost), Some((_, cells))) = (raw[r][f], astar(&inflated, origin, look_from))
             else {
                 return hover("assigned frontier unreachable");
             };
@@ -233,6 +251,7 @@ pub fn plan(
             RobotPlan {
                 frontier: Some(f),
                 cost_m: Some(cost),
+                goal: Some(inflated.center_of(goal)),
                 path,
                 hover_reason: None,
             }
@@ -311,6 +330,7 @@ fn hover(reason: &'static str) -> RobotPlan {
     RobotPlan {
         frontier: None,
         cost_m: None,
+        goal: None,
         path: vec![],
         hover_reason: Some(reason),
     }
@@ -388,8 +408,9 @@ mod tests {
     fn each_robot_goes_to_its_near_frontier() {
         let g = toy();
         let cfg = toy_config();
-        // Robot 0 in the left room, robot 1 in the right room.
-        let p = plan(&g, &[Some([1.0, 1.0]), Some([6.0, 1.0])], &cfg).unwrap();
+        // Robot 0 in the left room, robot 1 in the right room, both away from where they will
+        // look around from (at (1.0, 1.0) robot 0 would already be there: a path of one point).
+        let p = plan(&g, &[Some([2.5, 1.0]), Some([6.0, 1.0])], &cfg).unwrap();
         assert_eq!(p.frontiers.len(), 2);
         assert!(!p.complete);
         let target = |r: usize| p.frontiers[p.robots[r].frontier.unwrap()].centroid;
@@ -419,7 +440,7 @@ mod tests {
         // Greedy gives the same here (the rooms are separate).
         let g2 = plan(
             &g,
-            &[Some([1.0, 1.0]), Some([6.0, 1.0])],
+            &[Some([2.5, 1.0]), Some([6.0, 1.0])],
             &PlannerConfig {
                 strategy: Strategy::Greedy,
                 ..cfg.clone()
@@ -430,6 +451,25 @@ mod tests {
             g2.robots.iter().map(|r| r.frontier).collect::<Vec<_>>(),
             p.robots.iter().map(|r| r.frontier).collect::<Vec<_>>()
         );
+    }
+
+    #[test]
+    fn a_robot_looks_around_from_where_its_camera_has_room_not_from_the_frontiers_edge() {
+        let g = toy();
+        let cfg = toy_config();
+        let p = plan(&g, &[Some([6.0, 1.0])], &cfg).unwrap();
+        let r = &p.robots[0];
+        let f = &p.frontiers[r.frontier.unwrap()];
+        // The goal given up if the frontier stays is the frontier's own, on its edge...
+        assert_eq!(r.goal, Some(p.inflated.center_of(f.goal)));
+        assert!(crate::vantage::tests::room(&g, f.goal) < 0.2);
+        // ... but the path ends where the camera (blind nearer than 0.4 m) sees every side.
+        let end = g.cell_of(*r.path.last().unwrap()).unwrap();
+        let room = crate::vantage::tests::room(&g, end);
+        assert!(room >= cfg.look_around_room_m, "{end:?}: {room} m of room");
+        let [gx, gy] = r.goal.unwrap();
+        let [ex, ey] = *r.path.last().unwrap();
+        assert!((gx - ex).hypot(gy - ey) <= cfg.look_around_shift_m + 1e-9);
     }
 
     #[test]

@@ -770,8 +770,8 @@ impl Mission {
             .map(|f| plan.inflated.center_of(f.goal))
             .collect();
         for (i, &k) in exploring.iter().enumerate() {
-            let path = plan.robots[i].path.clone();
-            self.drones[k].set_plan(path.last().copied(), path, now);
+            let r = &plan.robots[i];
+            self.drones[k].set_plan(r.goal, r.path.clone(), now);
         }
         if let Some(r) = &self.recorder
             && now - self.last_plan_record >= 1.0
@@ -781,7 +781,7 @@ impl Mission {
                 goals: exploring
                     .iter()
                     .enumerate()
-                    .map(|(i, &k)| (k, plan.robots[i].path.last().copied()))
+                    .map(|(i, &k)| (k, plan.robots[i].goal))
                     .collect(),
                 frontiers: self.frontiers.clone(),
             });
