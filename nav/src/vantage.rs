@@ -109,26 +109,13 @@ pub(crate) mod tests {
     #[test]
     fn a_goal_against_a_wall_is_looked_around_from_a_step_back() {
         // 0.1 m cells: a room 2.0 × 1.6 m; the goal 0.2 m from the north wall.
-        let g = grid(&[
-            "######################",
-            "#....................#",
-            "#....................#",
-            "#....................#",
-            "#....................#",
-            "#....................#",
-            "#....................#",
-            "#....................#",
-            "#....................#",
-            "#....................#",
-            "#....................#",
-            "#....................#",
-            "#....................#",
-            "#....................#",
-            "#....................#",
-            "#....................#",
-            "#....................#",
-            "######################",
-        ]);
+        let wall = "#".repeat(22);
+        let inside = format!("#{}#", ".".repeat(20));
+        let rows: Vec<&str> = std::iter::once(wall.as_str())
+            .chain(std::iter::repeat_n(inside.as_str(), 16))
+            .chain(std::iter::once(wall.as_str()))
+            .collect();
+        let g = grid(&rows);
         let inflated = inflate(&g, 0.15);
         let goal = (10, 15);
         assert!(room(&g, goal) < 0.3);
@@ -149,17 +136,12 @@ pub(crate) mod tests {
     fn the_unknown_counts_as_a_wall_and_the_vantage_stays_on_the_goals_side() {
         // A frontier goal next to the unknown (west), a thin wall to the east with a wide free
         // room behind it: the cell of most room is behind the wall, out of sight of the goal.
-        let g = grid(&[
-            "###################",
-            "??......#.........#",
-            "??......#.........#",
-            "??......#.........#",
-            "??......#.........#",
-            "??......#.........#",
-            "??......#.........#",
-            "??......#.........#",
-            "###################",
-        ]);
+        let wall = "#".repeat(19);
+        let rows: Vec<&str> = std::iter::once(wall.as_str())
+            .chain(std::iter::repeat_n("??......#.........#", 7))
+            .chain(std::iter::once(wall.as_str()))
+            .collect();
+        let g = grid(&rows);
         let inflated = inflate(&g, 0.05);
         let goal = (2, 4);
         let v = vantage(&g, &inflated, goal, 0.6, 1.5);
