@@ -18,7 +18,7 @@ use crate::search::line_of_sight;
 /// `inflated`, in a straight line of free `inflated` cells from the goal) whose distance to
 /// anything on `map` that is not known free (a wall, the unknown, the map's edge) is at least
 /// `clearance_m`. Without one, the cell of most room among those candidates; the goal itself when
-/// nothing near it has more room than it.
+/// nothing near it has more room than it. With no room asked (`clearance_m` ≤ 0), the goal.
 pub fn vantage(
     map: &Grid,
     inflated: &Grid,
@@ -26,6 +26,9 @@ pub fn vantage(
     clearance_m: f64,
     max_shift_m: f64,
 ) -> CellXY {
+    if clearance_m <= 0.0 {
+        return goal; // no room asked: the goal is its own vantage (the planner's default)
+    }
     let res = map.resolution();
     let shift = (max_shift_m.max(0.0) / res).ceil() as isize;
     let half = shift + (clearance_m.max(0.0) / res).ceil() as isize + 1;
@@ -129,6 +132,8 @@ pub(crate) mod tests {
         // The nearest such cell: straight back from the wall, no further than needed.
         assert_eq!(v.0, 10, "{v:?}");
         assert!(dist_m(&g, goal, v) <= 0.5, "{v:?}");
+        // No room asked: the goal, wherever it is.
+        assert_eq!(vantage(&g, &inflated, goal, 0.0, 1.5), goal);
         // Where there is room already, the goal is its own vantage.
         assert_eq!(vantage(&g, &inflated, (10, 8), 0.6, 1.5), (10, 8));
     }

@@ -328,7 +328,10 @@ fn apply(s: &mut State, frame: UpRepr, now: Duration) {
         }
         UpRepr::Text(text) => {
             tracing::debug!("shield: {text}");
-            s.texts.push(StatusText { severity: 4, text });
+            s.texts.push(StatusText {
+                severity: StatusText::WARNING,
+                text,
+            });
         }
     }
 }
