@@ -609,16 +609,17 @@ impl Autopilot {
         };
         vehicle.set_sticks(self.channel_map.sticks(&pulses));
         for e in events {
-            match e {
-                VehicleEvent::Collision(p) => self.text(
+            if let VehicleEvent::Collision(p) = e {
+                self.text(
                     MavSeverity::MAV_SEVERITY_CRITICAL,
                     &format!("Collision at ({:.2}, {:.2}, {:.2})", p[0], p[1], p[2]),
-                ),
-                VehicleEvent::Landed if vehicle.mode() == FlightMode::Land => {
-                    self.disarm(vehicle, "Land complete: disarming");
-                }
-                _ => {}
+                );
             }
+        }
+        // LAND ends disarmed on the ground, however the vehicle got there: one that fell to the
+        // floor before LAND came (a wall, a bad height) is landed already and sees no touchdown.
+        if vehicle.mode() == FlightMode::Land && vehicle.state().armed && vehicle.state().landed {
+            self.disarm(vehicle, "Land complete: disarming");
         }
         let flying = vehicle.state().armed && !vehicle.state().landed;
         // GCS failsafe.
@@ -1059,6 +1060,30 @@ mod tests {
         fn z(&self) -> f64 {
             self.vehicle.state().position[2]
         }
+    }
+
+    #[test]
+    fn a_vehicle_already_on_the_floor_when_told_to_land_disarms() {
+        // Armed and never off the floor (as one that fell there while flying): no touchdown
+        // is left to see, and LAND must still end disarmed.
+        let mut b = Bench::new();
+        assert_eq!(
+            b.set_mode(FlightMode::AltHold),
+            MavResult::MAV_RESULT_ACCEPTED
+        );
+        assert_eq!(
+            b.command(
+                MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+                [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+            ),
+            MavResult::MAV_RESULT_ACCEPTED
+        );
+        b.run(1.0, Some(1100), true);
+        assert!(b.vehicle.state().armed && b.vehicle.state().landed);
+        assert_eq!(b.set_mode(FlightMode::Land), MavResult::MAV_RESULT_ACCEPTED);
+        b.run(1.0, Some(1500), true);
+        assert!(!b.vehicle.state().armed, "still armed on the floor in LAND");
+        assert!(b.texts().iter().any(|t| t == "Land complete: disarming"));
     }
 
     #[test]

@@ -98,7 +98,10 @@ impl Pose for Isometry3<f64> {
     const DOF: usize = 6;
     fn retract(&self, d: &[f64]) -> Self {
         let t = self.translation.vector + self.rotation * Vector3::new(d[0], d[1], d[2]);
-        let r = self.rotation * UnitQuaternion::from_scaled_axis(Vector3::new(d[3], d[4], d[5]));
+        let mut r =
+            self.rotation * UnitQuaternion::from_scaled_axis(Vector3::new(d[3], d[4], d[5]));
+        // Products round the norm off 1; iterations must not let that build up.
+        r.renormalize_fast();
         Isometry3::from_parts(Translation3::from(t), r)
     }
     fn error(xi: &Self, xj: &Self, z: &Self, out: &mut [f64]) {
