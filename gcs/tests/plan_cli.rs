@@ -77,11 +77,13 @@ fn plans_optimally_on_willow_and_draws_it() {
         let target = &r["target"];
         let path = r["path"].as_array().expect("path");
         assert!(path.len() >= 2, "{r}");
+        // The path ends where the robot will look around from: near its target, not on the
+        // frontier's edge (at most 1.5 m away, nav::vantage).
         let last = &path[path.len() - 1];
-        assert_eq!(
-            (last[0].as_f64(), last[1].as_f64()),
-            (target["x"].as_f64(), target["y"].as_f64())
-        );
+        let coord = |v: &Value| v.as_f64().expect("a number");
+        let off =
+            (coord(&last[0]) - coord(&target["x"])).hypot(coord(&last[1]) - coord(&target["y"]));
+        assert!(off <= 1.5 + 1e-9, "{r}: {off} m from the target");
         total += r["cost"].as_f64().expect("cost");
     }
     // The assignment is optimal for the cost matrix it printed.

@@ -6,7 +6,7 @@
 //! lost there (seen: 5 of 11 tracking losses in four two-drone missions began facing a wall
 //! 0.3–0.6 m away, most during the turn at a goal). A robot can look around instead from the free
 //! cell nearest its goal, in sight of it, with room on every side
-//! ([`crate::PlannerConfig::look_around_room_m`]; off by default, see its note).
+//! ([`crate::PlannerConfig::look_around_room_m`], 0.7 m by default).
 
 use image::{GrayImage, Luma};
 use imageproc::distance_transform::euclidean_squared_distance_transform;

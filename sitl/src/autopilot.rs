@@ -1060,24 +1060,30 @@ mod tests {
         fn z(&self) -> f64 {
             self.vehicle.state().position[2]
         }
+
+        /// A bench whose vehicle was put in ALT_HOLD and armed (on the floor).
+        fn armed_in_alt_hold() -> Self {
+            let mut b = Self::new();
+            assert_eq!(
+                b.set_mode(FlightMode::AltHold),
+                MavResult::MAV_RESULT_ACCEPTED
+            );
+            assert_eq!(
+                b.command(
+                    MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+                    [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+                ),
+                MavResult::MAV_RESULT_ACCEPTED
+            );
+            b
+        }
     }
 
     #[test]
     fn a_vehicle_already_on_the_floor_when_told_to_land_disarms() {
         // Armed and never off the floor (as one that fell there while flying): no touchdown
         // is left to see, and LAND must still end disarmed.
-        let mut b = Bench::new();
-        assert_eq!(
-            b.set_mode(FlightMode::AltHold),
-            MavResult::MAV_RESULT_ACCEPTED
-        );
-        assert_eq!(
-            b.command(
-                MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
-                [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
-            ),
-            MavResult::MAV_RESULT_ACCEPTED
-        );
+        let mut b = Bench::armed_in_alt_hold();
         b.run(1.0, Some(1100), true);
         assert!(b.vehicle.state().armed && b.vehicle.state().landed);
         assert_eq!(b.set_mode(FlightMode::Land), MavResult::MAV_RESULT_ACCEPTED);
@@ -1088,18 +1094,7 @@ mod tests {
 
     #[test]
     fn alt_hold_arm_climb_hold_land_disarm() {
-        let mut b = Bench::new();
-        assert_eq!(
-            b.set_mode(FlightMode::AltHold),
-            MavResult::MAV_RESULT_ACCEPTED
-        );
-        assert_eq!(
-            b.command(
-                MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
-                [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
-            ),
-            MavResult::MAV_RESULT_ACCEPTED
-        );
+        let mut b = Bench::armed_in_alt_hold();
         b.run(2.0, Some(1800), true);
         assert!(b.z() > 0.8, "climbed to {}", b.z());
         b.run(1.0, Some(1500), true);
