@@ -1,11 +1,15 @@
 //! `gcs fly --config FLEET.toml` against an external fleet: a simulator serving one MAVLink
 //! vehicle and one shield vehicle (thesis wiring) on their own TCP ports, and their cameras on a
-//! TCP frame stream — the station reaches them exactly as it would reach hardware.
+//! TCP frame stream — the station reaches them exactly as it would reach hardware; and an
+//! autopilot flown elsewhere whose camera the bridge renders (the ArduPilot SITL setup).
 
 mod common;
 
+use std::sync::Arc;
+
 use common::{gcs, serve_fleet};
-use sitl::Protocol;
+use sitl::bridge::{BridgeConfig, BridgedVehicle, CameraBridge};
+use sitl::{EndpointSpec, Protocol, SimConfig, Sitl, SitlConfig, World};
 
 #[test]
 fn fly_explores_with_an_external_fleet_over_mavlink_and_the_shield_and_lands() {
@@ -84,5 +88,96 @@ fn a_bad_fleet_file_is_refused_with_what_to_fix() {
     }
     let run = gcs(&["fly", "--config", "/nonexistent/fleet.toml"]);
     assert!(String::from_utf8_lossy(&run.stderr).contains("cannot read the fleet file"));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn fly_explores_with_an_autopilot_whose_camera_the_bridge_renders_at_its_reported_pose() {
+    // As with ArduPilot SITL: the autopilot flies its own physics and knows nothing of cameras;
+    // the bridge listens to it beside the station (both on the autopilot's UDP port, as on
+    // MAVProxy's two outputs) and renders the building at the pose it reports.
+    let dir = std::env::temp_dir().join(format!("gcs-fly-bridge-{}", std::process::id()));
+    let sitl = Sitl::start(SitlConfig {
+        world: Arc::new(World::load("apartment").expect("built-in world")),
+        // No camera of its own: the bridge renders it.
+        sim: SimConfig {
+            camera: None,
+            ..SimConfig::default()
+        },
+        vehicles: vec![EndpointSpec {
+            protocol: Protocol::Mavlink,
+            address: "udpin:127.0.0.1:0".parse().expect("address"),
+        }],
+        camera: None,
+        speed: 1.0,
+        signing_key: None,
+    })
+    .expect("the simulator starts");
+    let port = sitl.endpoint_addrs()[0].expect("a local address").port();
+    let autopilot: link::Address = format!("udpout:127.0.0.1:{port}").parse().expect("address");
+    let bridge = CameraBridge::start(BridgeConfig::new(
+        Arc::new(World::load("apartment").expect("built-in world")),
+        vec![BridgedVehicle {
+            address: autopilot.clone(),
+            map_from_local: [0.0; 3],
+        }],
+        Some("tcpin:127.0.0.1:0".parse().expect("address")),
+    ))
+    .expect("the bridge starts");
+    let camera = bridge.camera_addr().expect("a camera stream").port();
+    let [x, y, yaw] = sitl.starts()[0];
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let fleet = dir.join("fleet.toml");
+    std::fs::write(
+        &fleet,
+        format!(
+            "[[vehicle]]\nprotocol = \"mavlink\"\naddress = \"{autopilot}\"\ncamera = \"tcpout:127.0.0.1:{camera}\"\nstart = [{x}, {y}, {yaw}]\n"
+        ),
+    )
+    .expect("fleet file");
+    let out = dir.join("out");
+    let run = gcs(&[
+        "fly",
+        "--config",
+        fleet.to_str().expect("utf-8 path"),
+        "--timeout",
+        "25",
+        "--json",
+        "--out",
+        out.to_str().expect("utf-8 path"),
+    ]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    let summary: serde_json::Value = serde_json::from_slice(&run.stdout).expect("JSON");
+    std::fs::write("/tmp/fb-stderr.log", &run.stderr).ok();
+    let d = &summary["drones"][0];
+    assert_eq!(d["final_phase"], "landed", "{summary}");
+    assert!(d["path_length_m"].as_f64().unwrap_or(0.0) > 1.0, "{d}");
+    assert!(d["camera_frames"].as_u64().unwrap_or(0) > 150, "{d}");
+    // Frames rendered at the last pose reported (10 Hz here) showed the past, and the station
+    // lost track of them within seconds (over 220 of some 270 frames lost).
+    assert!(d["lost_frames"].as_u64().unwrap_or(u64::MAX) < 50, "{d}");
+    // The station tracked the rendered camera where the vehicle really flew: its last camera
+    // pose is where the simulator has the vehicle (landed there since).
+    let tum = std::fs::read_to_string(out.join("drone1.tum")).expect("drone1.tum");
+    let last: Vec<f64> = tum
+        .lines()
+        .rfind(|l| !l.starts_with('#') && !l.trim().is_empty())
+        .expect("a pose")
+        .split_whitespace()
+        .filter_map(|v| v.parse().ok())
+        .collect();
+    let truth = sitl.with_sim(|sim| sim.vehicle(0).map_from_camera());
+    let off =
+        ((last[1] - truth.translation.x).powi(2) + (last[2] - truth.translation.y).powi(2)).sqrt();
+    assert!(
+        off < 0.3,
+        "last SLAM camera pose {off:.2} m from the truth: {last:?}"
+    );
+    sitl.with_sim(|sim| {
+        let s = sim.vehicle(0).state();
+        assert!(s.landed && !s.armed, "{s:?}");
+    });
+    drop(bridge);
     std::fs::remove_dir_all(&dir).ok();
 }

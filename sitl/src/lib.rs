@@ -7,14 +7,18 @@
 //! * [`sim`]: vehicles in a world, stepped in simulated time, deterministic for a seed;
 //! * [`autopilot`]: an ArduPilot-Copter-like autopilot speaking MAVLink;
 //! * [`runner`]: the simulator running in real time or faster, with each vehicle served over its
-//!   own transport (shield firmware or MAVLink autopilot) and cameras streamed.
+//!   own transport (shield firmware or MAVLink autopilot) and cameras streamed ([`stream`]);
+//! * [`bridge`]: cameras for autopilots flown elsewhere (ArduPilot SITL), rendered at the pose
+//!   each reports.
 
 pub mod autopilot;
+pub mod bridge;
 pub mod render;
 pub mod rng;
 pub mod runner;
 pub mod sensors;
 pub mod sim;
+pub mod stream;
 pub mod vehicle;
 pub mod world;
 

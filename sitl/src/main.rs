@@ -7,6 +7,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use clap::{Parser, Subcommand};
+use sitl::bridge::{BridgeConfig, BridgedVehicle, CameraBridge};
 use sitl::render::render;
 use sitl::world::{BUILT_IN, DEFAULT_WORLD};
 use sitl::{Camera, EndpointSpec, Protocol, SimConfig, Sitl, SitlConfig, VehicleParams, World};
@@ -25,6 +26,11 @@ enum Command {
     ///
     /// Example: sitl run --vehicle mavlink@tcpin:127.0.0.1:5760 --vehicle shield@tcpin:127.0.0.1:5800 --camera tcpin:127.0.0.1:5900
     Run(RunArgs),
+    /// Render cameras for autopilots flown elsewhere (ArduPilot SITL), at the pose each reports.
+    ///
+    /// Example, beside `sim_vehicle.py -v ArduCopter` (its MAVProxy sends to UDP 14550 and
+    /// 14551): sitl camera --vehicle udpin:127.0.0.1:14551@13.1,2.1,0 --camera tcpin:127.0.0.1:5900
+    Camera(CameraArgs),
     /// Render one camera view of a world to PNG files (colour, and depth in millimetres).
     Snapshot(SnapshotArgs),
     /// List the built-in worlds.
@@ -76,6 +82,34 @@ struct RunArgs {
     /// station sends SETUP_SIGNING (`gcs key setup`).
     #[arg(long, value_name = "FILE")]
     signing_key: Option<PathBuf>,
+}
+
+#[derive(clap::Args)]
+struct CameraArgs {
+    #[command(flatten)]
+    world: WorldArg,
+    /// An autopilot: ADDRESS, or ADDRESS@X,Y,NORTH when it reports positions from an origin of
+    /// its own (ArduPilot: where it was powered up) — that origin in the map (metres) and the
+    /// map heading of its north axis (degrees). Repeat for more; camera ids on the stream
+    /// follow this order (0, 1, …). Without @, positions are taken as map coordinates (what
+    /// `sitl run`'s own autopilots report).
+    #[arg(long = "vehicle", value_name = "ADDRESS[@X,Y,NORTH]", required = true)]
+    vehicles: Vec<BridgedVehicle>,
+    /// Serve the camera frame stream (link/CAMERA.md) on tcpin:HOST:PORT.
+    #[arg(long, value_name = "ADDRESS", default_value = "tcpin:127.0.0.1:5900")]
+    camera: link::Address,
+    /// Camera image size.
+    #[arg(long, default_value = "320x240", value_parser = parse_size)]
+    camera_size: (u32, u32),
+    /// Camera frames per second per vehicle (wall time), at most 100.
+    #[arg(long, default_value_t = 10.0)]
+    camera_hz: f64,
+    /// Seed of the cameras' noise.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Stop after this many seconds (default: run until interrupted).
+    #[arg(long)]
+    duration: Option<f64>,
 }
 
 #[derive(clap::Args)]
@@ -145,6 +179,7 @@ fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Run(args) => run(args),
+        Command::Camera(args) => camera(args),
         Command::Snapshot(args) => snapshot(args),
         Command::Worlds => {
             for (name, text) in BUILT_IN {
@@ -272,6 +307,89 @@ fn run(args: RunArgs) -> anyhow::Result<()> {
         println!("{line}");
     }
     sitl.stop();
+    Ok(())
+}
+
+fn camera(args: CameraArgs) -> anyhow::Result<()> {
+    let world = load_world(&args.world)?;
+    if let Some(d) = args.duration
+        && !(d.is_finite() && d > 0.0)
+    {
+        bail!("--duration {d} must be a positive number of seconds");
+    }
+    let (w, h) = args.camera_size;
+    let bridge = CameraBridge::start(BridgeConfig {
+        camera: Camera::kinect(w, h),
+        camera_hz: args.camera_hz,
+        seed: args.seed,
+        ..BridgeConfig::new(
+            world.clone(),
+            args.vehicles.clone(),
+            Some(args.camera.clone()),
+        )
+    })
+    .context("cannot start the camera bridge")?;
+    let frames = bridge.subscribe();
+    let mut out = std::io::stdout().lock();
+    writeln!(
+        out,
+        "sitl camera: world '{}', {} autopilot(s)",
+        world.name(),
+        args.vehicles.len()
+    )?;
+    for (k, v) in args.vehicles.iter().enumerate() {
+        let [x, y, north] = v.map_from_local;
+        writeln!(
+            out,
+            "sitl camera: camera {k}: the autopilot on {}, its local origin at ({x:.2}, {y:.2}), north at {:.1}° in the map",
+            v.address,
+            north.to_degrees()
+        )?;
+    }
+    if let Some(a) = bridge.camera_addr() {
+        writeln!(
+            out,
+            "sitl camera: camera stream on tcp {a} ({w}×{h} at {} Hz)",
+            args.camera_hz
+        )?;
+    }
+    writeln!(out, "sitl: ready")?;
+    out.flush()?;
+    drop(out);
+    // Every 10 s, how many frames each camera rendered: a camera without frames has no pose
+    // from its autopilot.
+    let start = Instant::now();
+    let mut counts = vec![0u64; args.vehicles.len()];
+    let mut last_report = Instant::now();
+    loop {
+        if let Ok(f) = frames.recv_timeout(Duration::from_millis(100))
+            && let Some(c) = counts.get_mut(usize::from(f.frame.vehicle))
+        {
+            *c += 1;
+        }
+        if args
+            .duration
+            .is_some_and(|d| start.elapsed().as_secs_f64() >= d)
+        {
+            break;
+        }
+        if last_report.elapsed() >= Duration::from_secs(10) {
+            for (k, (c, v)) in counts.iter().zip(&args.vehicles).enumerate() {
+                if *c == 0 {
+                    tracing::warn!(
+                        "camera {k}: no pose from {} yet (no vehicle heard, or it sends no LOCAL_POSITION_NED and ATTITUDE: an ArduPilot needs a position estimate)",
+                        v.address
+                    );
+                } else {
+                    tracing::info!("camera {k}: {c} frames");
+                }
+            }
+            last_report = Instant::now();
+        }
+    }
+    for (k, c) in counts.iter().enumerate() {
+        println!("sitl camera: camera {k}: {c} frames");
+    }
     Ok(())
 }
 

@@ -12,10 +12,10 @@
 //! Timeouts and failsafes count simulated time, as ArduPilot's SITL does when sped up.
 
 use std::io::{Read, Write};
-use std::net::{SocketAddr, TcpListener};
+use std::net::SocketAddr;
 use std::str::FromStr;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
+use std::sync::mpsc::Receiver;
 use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -28,6 +28,7 @@ use link::{Address, ChannelMap, FlightMode, Sticks, Transport, TransportError};
 use crate::autopilot::{Autopilot, AutopilotConfig, RcStats};
 use crate::sensors::Readings;
 use crate::sim::{CameraFrame, Sim, SimConfig, SimError};
+use crate::stream::{self, Subscribers};
 use crate::vehicle::{Vehicle, VehicleEvent};
 use crate::world::World;
 
@@ -113,11 +114,11 @@ pub enum SitlError {
 /// The shared state of a running simulator.
 struct Shared {
     sim: Mutex<Sim>,
-    stop: AtomicBool,
+    stop: Arc<AtomicBool>,
     time_us: AtomicU64,
-    /// Camera frame subscribers; `true` for those that must see every frame (the simulation
-    /// waits for them).
-    subscribers: Mutex<Vec<(SyncSender<Arc<CameraFrame>>, bool)>>,
+    /// Camera frame subscribers, in process and over the network (the lossless ones hold up
+    /// the simulation while they are behind).
+    subscribers: Arc<Subscribers>,
     /// Endpoints whose link is to die at the next tick.
     cut: Mutex<Vec<usize>>,
     /// Vehicles whose camera has failed (their frames are no longer sent).
@@ -153,9 +154,9 @@ impl Sitl {
         )?;
         let shared = Arc::new(Shared {
             sim: Mutex::new(sim),
-            stop: AtomicBool::new(false),
+            stop: Arc::new(AtomicBool::new(false)),
             time_us: AtomicU64::new(0),
-            subscribers: Mutex::new(vec![]),
+            subscribers: Arc::default(),
             cut: Mutex::new(vec![]),
             dead_cameras: Mutex::new(vec![]),
             rc_stats: Mutex::new(vec![]),
@@ -194,23 +195,12 @@ impl Sitl {
         }
         let camera = match &config.camera {
             None => None,
-            Some(Address::TcpIn(hp)) => {
-                let listener = TcpListener::bind(hp)
-                    .map_err(|e| SitlError::Camera(format!("cannot listen on {hp}: {e}")))?;
-                let addr = listener.local_addr().ok();
-                let shared = shared.clone();
-                threads.extend(
-                    std::thread::Builder::new()
-                        .name("sitl-camera".into())
-                        .spawn(move || serve_cameras(listener, &shared))
-                        .ok(),
-                );
-                addr
-            }
-            Some(a) => {
-                return Err(SitlError::Camera(format!(
-                    "{a}: the camera stream listens for stations; give tcpin:HOST:PORT"
-                )));
+            Some(address) => {
+                let (addr, thread) =
+                    stream::listen(address, shared.subscribers.clone(), shared.stop.clone())
+                        .map_err(SitlError::Camera)?;
+                threads.push(thread);
+                Some(addr)
             }
         };
         {
@@ -271,7 +261,7 @@ impl Sitl {
     /// Every camera frame from now on; frames are dropped when the receiver falls 8 behind
     /// (like a network stream).
     pub fn subscribe(&self) -> Receiver<Arc<CameraFrame>> {
-        self.add_subscriber(false)
+        self.shared.subscribers.add(false, 8)
     }
 
     /// Every camera frame from now on, none dropped: when the receiver falls 2 behind, simulated
@@ -279,17 +269,7 @@ impl Sitl {
     /// machine's load — and see it soon: a deeper queue is latency, in simulated time, between
     /// a frame and the pose the vehicle flies on). Drop the receiver to release the simulation.
     pub fn subscribe_all(&self) -> Receiver<Arc<CameraFrame>> {
-        self.add_subscriber(true)
-    }
-
-    fn add_subscriber(&self, lossless: bool) -> Receiver<Arc<CameraFrame>> {
-        let (tx, rx) = sync_channel(if lossless { 2 } else { 8 });
-        self.shared
-            .subscribers
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .push((tx, lossless));
-        rx
+        self.shared.subscribers.add(true, 2)
     }
 
     /// Kills vehicle `k`'s link, as a radio that dies in flight: from the next tick its
@@ -653,23 +633,7 @@ fn physics(shared: &Shared, mut endpoints: Vec<Box<dyn Endpoint>>, speed: f64) {
         shared
             .time_us
             .store(now.as_micros() as u64, Ordering::Relaxed);
-        if !frames.is_empty() {
-            let mut subs = shared
-                .subscribers
-                .lock()
-                .unwrap_or_else(PoisonError::into_inner);
-            for f in frames {
-                let f = Arc::new(f);
-                subs.retain(|(s, lossless)| {
-                    if *lossless {
-                        // Waits while the receiver is behind; gone receivers are dropped.
-                        s.send(f.clone()).is_ok()
-                    } else {
-                        !matches!(s.try_send(f.clone()), Err(TrySendError::Disconnected(_)))
-                    }
-                });
-            }
-        }
+        shared.subscribers.publish(frames);
         if speed.is_finite() {
             let due = start + Duration::from_secs_f64(now.as_secs_f64() / speed);
             let wait = due.saturating_duration_since(Instant::now());
@@ -695,63 +659,10 @@ fn physics(shared: &Shared, mut endpoints: Vec<Box<dyn Endpoint>>, speed: f64) {
     }
 }
 
-/// Serves the camera frame stream to every station that connects.
-fn serve_cameras(listener: TcpListener, shared: &Arc<Shared>) {
-    if let Err(e) = listener.set_nonblocking(true) {
-        tracing::error!("camera stream: {e}");
-        return;
-    }
-    let mut clients: Vec<JoinHandle<()>> = vec![];
-    while !shared.stop.load(Ordering::Relaxed) {
-        match listener.accept() {
-            Ok((mut stream, peer)) => {
-                tracing::info!(%peer, "camera stream client connected");
-                let _ = stream.set_nonblocking(false);
-                let _ = stream.set_nodelay(true);
-                let (tx, rx) = sync_channel::<Arc<CameraFrame>>(4);
-                shared
-                    .subscribers
-                    .lock()
-                    .unwrap_or_else(PoisonError::into_inner)
-                    .push((tx, false));
-                let stop = shared.clone();
-                clients.extend(
-                    std::thread::Builder::new()
-                        .name("sitl-camera-client".into())
-                        .spawn(move || {
-                            while !stop.stop.load(Ordering::Relaxed) {
-                                let Ok(f) = rx.recv_timeout(Duration::from_millis(100)) else {
-                                    continue;
-                                };
-                                let sent =
-                                    f.frame.encode(90).map_err(|e| e.to_string()).and_then(|b| {
-                                        stream.write_all(&b).map_err(|e| e.to_string())
-                                    });
-                                if let Err(e) = sent {
-                                    tracing::info!(%peer, "camera stream client left: {e}");
-                                    return;
-                                }
-                            }
-                        })
-                        .ok(),
-                );
-            }
-            Err(e) if is_timeout(&e) => std::thread::sleep(Duration::from_millis(20)),
-            Err(e) => {
-                tracing::warn!("camera stream: accept failed: {e}");
-                std::thread::sleep(Duration::from_millis(200));
-            }
-        }
-        clients.retain(|c| !c.is_finished());
-    }
-    for c in clients {
-        let _ = c.join();
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::net::TcpListener;
 
     #[test]
     fn endpoint_specs_parse_and_explain_mistakes() {

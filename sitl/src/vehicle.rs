@@ -247,16 +247,7 @@ impl Vehicle {
 
     /// The camera's optical frame (x right, y down, z forward) in the map.
     pub fn map_from_camera(&self) -> Isometry3<f64> {
-        let [x, y, z] = self.params.camera_offset;
-        let body_from_camera = Isometry3::from_parts(
-            Translation3::new(x, y, z),
-            UnitQuaternion::from_matrix(&nalgebra::Matrix3::new(
-                0.0, 0.0, 1.0, //
-                -1.0, 0.0, 0.0, //
-                0.0, -1.0, 0.0,
-            )),
-        );
-        self.map_from_body() * body_from_camera
+        self.map_from_body() * body_from_camera(self.params.camera_offset)
     }
 
     /// Advances `dt` seconds in `world` (in steps of at most [`MAX_STEP`]).
@@ -483,6 +474,20 @@ pub fn wrap(a: f64) -> f64 {
     } else {
         w
     }
+}
+
+/// The camera's optical frame (x right, y down, z forward) in the body (FLU), for a camera
+/// looking forward from `offset` (metres, FLU).
+pub fn body_from_camera(offset: [f64; 3]) -> Isometry3<f64> {
+    let [x, y, z] = offset;
+    Isometry3::from_parts(
+        Translation3::new(x, y, z),
+        UnitQuaternion::from_matrix(&nalgebra::Matrix3::new(
+            0.0, 0.0, 1.0, //
+            -1.0, 0.0, 0.0, //
+            0.0, -1.0, 0.0,
+        )),
+    )
 }
 
 #[cfg(test)]

@@ -188,3 +188,125 @@ fn snapshot_writes_colour_and_depth_images() {
     assert!(depth.pixels().filter(|p| p[0] > 0).count() > 160 * 120 / 4);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// The median difference, in millimetres, between a frame's depth and `depth` where both have a
+/// reading, and the fraction of pixels whose validity differs.
+fn depth_difference(frame: &[u16], depth: &[u16]) -> (u16, f64) {
+    let mut d: Vec<u16> = frame
+        .iter()
+        .zip(depth)
+        .filter(|(a, b)| **a > 0 && **b > 0)
+        .map(|(a, b)| a.abs_diff(*b))
+        .collect();
+    d.sort_unstable();
+    let differ = frame
+        .iter()
+        .zip(depth)
+        .filter(|(a, b)| (**a > 0) != (**b > 0))
+        .count();
+    (
+        d.get(d.len() / 2).copied().unwrap_or(u16::MAX),
+        differ as f64 / frame.len() as f64,
+    )
+}
+
+#[test]
+fn the_camera_bridge_renders_an_autopilot_at_the_pose_it_reports() {
+    // An autopilot flown elsewhere (here `sitl run`'s own, on a UDP port that answers every
+    // client, as ArduPilot SITL's MAVProxy outputs do), and the bridge listening to it.
+    let port = tests::free_udp_port();
+    let mut autopilot = SitlProcess::start(&[
+        "run",
+        "--vehicle",
+        &format!("mavlink@udpin:127.0.0.1:{port}"),
+        "--duration",
+        "60",
+    ]);
+    let line = autopilot.wait_for("start [", Duration::from_secs(1));
+    let start: Vec<f64> = line
+        .split_once("start [")
+        .and_then(|(_, s)| s.split_once(']'))
+        .map(|(s, _)| s.split(',').filter_map(|v| v.trim().parse().ok()).collect())
+        .unwrap_or_default();
+    assert_eq!(start.len(), 3, "{line}");
+    let mut bridge = SitlProcess::start(&[
+        "camera",
+        "--vehicle",
+        &format!("udpout:127.0.0.1:{port}"),
+        "--camera",
+        "tcpin:127.0.0.1:0",
+        "--camera-hz",
+        "5",
+        "--duration",
+        "60",
+    ]);
+    let line = bridge.wait_for("camera stream on tcp", Duration::from_secs(1));
+    let addr = line
+        .split_whitespace()
+        .nth(6)
+        .unwrap_or_else(|| panic!("no address in {line:?}"))
+        .to_owned();
+    let mut stream = TcpStream::connect(&addr).expect("connect to the camera stream");
+    stream
+        .set_read_timeout(Some(Duration::from_secs(10)))
+        .expect("timeout");
+    let frame = RgbdFrame::read_from(&mut stream).expect("a frame");
+    assert_eq!((frame.vehicle, frame.width, frame.height), (0, 320, 240));
+
+    // The vehicle stands at its start: the frame is the view from there, not from a pose
+    // turned by 20° or moved by 0.3 m.
+    let world = sitl::World::load("apartment").expect("world");
+    let camera = sitl::Camera::kinect(320, 240);
+    let view = |x: f64, y: f64, yaw: f64| {
+        let v = sitl::Vehicle::new(sitl::VehicleParams::default(), x, y, yaw);
+        sitl::render::render(&world, &v.map_from_camera(), &camera, None).1
+    };
+    let (x, y, yaw) = (start[0], start[1], start[2]);
+    let (here, differ) = depth_difference(&frame.depth_mm, &view(x, y, yaw));
+    assert!(here <= 10 && differ < 0.02, "{here} mm, {differ}");
+    for (name, other) in [
+        ("turned", view(x, y, yaw + 20f64.to_radians())),
+        ("moved", view(x + 0.3 * yaw.cos(), y + 0.3 * yaw.sin(), yaw)),
+    ] {
+        let (there, _) = depth_difference(&frame.depth_mm, &other);
+        assert!(
+            there > 5 * here.max(4),
+            "{name}: {there} mm against {here} mm"
+        );
+    }
+}
+
+#[test]
+fn the_camera_bridge_refuses_bad_input() {
+    for (args, expected) in [
+        (
+            vec!["camera", "--vehicle", "udpout:127.0.0.1:14551@1,2"],
+            "three numbers X,Y,NORTH",
+        ),
+        (vec!["camera", "--vehicle", "radio:14551"], "radio:14551"),
+        (
+            vec![
+                "camera",
+                "--vehicle",
+                "udpout:127.0.0.1:14551",
+                "--camera",
+                "udpin:127.0.0.1:0",
+            ],
+            "give tcpin:HOST:PORT",
+        ),
+        (
+            vec![
+                "camera",
+                "--vehicle",
+                "udpout:127.0.0.1:14551",
+                "--camera-hz",
+                "0",
+            ],
+            "must be above 0",
+        ),
+    ] {
+        let (ok, out) = sitl(&args);
+        assert!(!ok, "{args:?}");
+        assert!(out.contains(expected), "{args:?}: {out}");
+    }
+}

@@ -92,6 +92,9 @@ pub struct MavlinkConfig {
     pub system_id: u8,
     /// Our component id (190: MAV_COMP_ID_MISSIONPLANNER, what ground stations use).
     pub component_id: u8,
+    /// What our heartbeat says we are. A ground station (`MAV_TYPE_GCS`) keeps the vehicles'
+    /// GCS failsafe at bay; a passive listener (a camera bridge: `MAV_TYPE_CAMERA`) must not.
+    pub mav_type: MavType,
     /// Protocol version we send (we accept both).
     pub version: MavlinkVersion,
     /// RC override frames per second (ArduPilot drops an override 3 s after the last one).
@@ -117,6 +120,7 @@ impl Default for MavlinkConfig {
         Self {
             system_id: 255,
             component_id: 190,
+            mav_type: MavType::MAV_TYPE_GCS,
             version: MavlinkVersion::V2,
             rc_rate_hz: 20.0,
             heartbeat_period: Duration::from_secs(1),
@@ -538,7 +542,7 @@ fn write_loop(shared: &Shared, mut writer: Writer, alive: &AtomicBool) {
             }
             let now = Instant::now();
             if now >= next_hb {
-                out.push(gcs_heartbeat());
+                out.push(heartbeat(cfg.mav_type));
                 next_hb = now + cfg.clock.wall_period(cfg.heartbeat_period);
             }
             out.extend(s.outbox.drain(..));
@@ -613,10 +617,10 @@ impl Sender<'_> {
     }
 }
 
-fn gcs_heartbeat() -> MavMessage {
+fn heartbeat(mavtype: MavType) -> MavMessage {
     MavMessage::HEARTBEAT(HEARTBEAT_DATA {
         custom_mode: 0,
-        mavtype: MavType::MAV_TYPE_GCS,
+        mavtype,
         autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
         base_mode: MavModeFlag::empty(),
         system_status: MavState::MAV_STATE_ACTIVE,
