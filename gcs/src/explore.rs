@@ -369,6 +369,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
             version: 1,
             world: Some(world.name().into()),
             strategy: args.sim.strategy.name().into(),
+            planner_radii: RuntimeConfig::default().planner_radii,
             drones: fleet
                 .drones
                 .iter()

@@ -162,6 +162,7 @@ pub fn run_with(args: &FlyArgs, window: Option<Window>) -> anyhow::Result<()> {
             version: 1,
             world: None,
             strategy: "hungarian".into(),
+            planner_radii: RuntimeConfig::default().planner_radii,
             drones: fleet
                 .iter()
                 .map(|v| SetupDrone::new(&v.name, v.start, &body_from_camera, v.altitude))

@@ -13,7 +13,7 @@ use link::camera::{Intrinsics, RgbdFrame};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 use nav::grid::{Cell, Grid};
 
-use crate::record::{DroneState, Setup};
+use crate::record::{DroneState, PlannedGoal, Setup};
 use crate::runtime::perception::CameraFrame;
 
 /// A recorded mission, as replay needs it.
@@ -27,10 +27,24 @@ pub struct MissionLog {
     pub states: Vec<Vec<DroneState>>,
     /// The last recorded 2D map.
     pub grid: Option<Grid>,
+    /// The planner's decisions in time order (`/plan`); logs older than the positions and
+    /// given-up goals in them give none.
+    pub plans: Vec<RecordedPlan>,
     /// Messages read.
     pub messages: usize,
     /// The log ended in an unreadable message (a crash cut it short).
     pub truncated: bool,
+}
+
+/// One planner decision as recorded, with what it was made from besides the map.
+#[derive(Debug, Clone, PartialEq, serde::Deserialize)]
+pub struct RecordedPlan {
+    /// Mission clock, seconds.
+    pub t: f64,
+    /// Per exploring drone, where it was and its goal.
+    pub goals: Vec<PlannedGoal>,
+    /// The goals given up by then.
+    pub given_up: Vec<[f64; 2]>,
 }
 
 /// Reads what replay needs from a mission log; stops at the first unreadable message (a log cut
@@ -51,6 +65,7 @@ pub fn read(bytes: &[u8], origin: &str) -> anyhow::Result<MissionLog> {
     let mut setup = None;
     let mut states: BTreeMap<usize, Vec<DroneState>> = BTreeMap::new();
     let mut grid = None;
+    let mut plans = vec![];
     // Per drone: the latest calibration, and colour and depth waiting for their partner.
     let mut calibration: BTreeMap<usize, CameraCalibration> = BTreeMap::new();
     let mut colour: BTreeMap<usize, (u64, Vec<u8>)> = BTreeMap::new();
@@ -80,6 +95,11 @@ pub fn read(bytes: &[u8], origin: &str) -> anyhow::Result<MissionLog> {
             ("/map", _) => {
                 if let Ok(g) = FoxGrid::decode(&m.data[..]) {
                     grid = grid_of(&g);
+                }
+            }
+            ("/plan", _) => {
+                if let Ok(p) = serde_json::from_slice::<RecordedPlan>(&m.data) {
+                    plans.push(p);
                 }
             }
             (t, Some(k)) if t.ends_with("/state") => {
@@ -177,6 +197,7 @@ pub fn read(bytes: &[u8], origin: &str) -> anyhow::Result<MissionLog> {
         setup,
         frames,
         grid,
+        plans,
         messages,
         truncated,
     })

@@ -39,6 +39,9 @@ pub struct Setup {
     pub world: Option<String>,
     /// Assignment strategy.
     pub strategy: String,
+    /// The planner's robot radii, tried widest first (absent from older logs).
+    #[serde(default)]
+    pub planner_radii: Vec<f64>,
     /// The drones.
     pub drones: Vec<SetupDrone>,
 }
@@ -104,6 +107,31 @@ pub struct DroneState {
     pub pose: Option<[f64; 4]>,
 }
 
+/// One exploring drone in a planner decision, as written on `/plan` (`drone` 1-based there).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PlannedGoal {
+    /// The drone (0-based here; 1-based in the log).
+    #[serde(serialize_with = "one_based", deserialize_with = "from_one_based")]
+    pub drone: usize,
+    /// Where the planner had it (x, y), `None` without a valid pose.
+    #[serde(default)]
+    pub position: Option<[f64; 2]>,
+    /// The frontier goal it was given, if any.
+    pub goal: Option<[f64; 2]>,
+}
+
+fn one_based<S: serde::Serializer>(k: &usize, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_u64(*k as u64 + 1)
+}
+
+fn from_one_based<'de, D: serde::Deserializer<'de>>(d: D) -> Result<usize, D::Error> {
+    let k = u64::deserialize(d)?;
+    usize::try_from(k)
+        .ok()
+        .and_then(|k| k.checked_sub(1))
+        .ok_or_else(|| serde::de::Error::custom(format!("drone {k}: drones count from 1")))
+}
+
 /// One thing to record.
 #[derive(Debug, Clone)]
 pub enum Record {
@@ -150,14 +178,17 @@ pub enum Record {
         /// The points, metres.
         points: Vec<[f64; 3]>,
     },
-    /// A planner decision.
+    /// A planner decision, with what it was made from besides the map (recorded on `/map` at
+    /// the same time), so that a replay can make it again.
     Plan {
         /// Mission clock, seconds.
         t: f64,
-        /// Per exploring drone, its goal.
-        goals: Vec<(usize, Option<[f64; 2]>)>,
+        /// Per exploring drone, where it was and the goal it was given.
+        goals: Vec<PlannedGoal>,
         /// The frontiers' goal points.
         frontiers: Vec<[f64; 2]>,
+        /// The goals given up so far (the planner skips frontiers near them).
+        given_up: Vec<[f64; 2]>,
     },
     /// A text message from a vehicle (MAVLink `STATUSTEXT`, the shield's reports).
     VehicleText {
@@ -699,12 +730,14 @@ fn write_record(w: &mut McapWriter, ch: &mut Channels, r: &Record) -> Result<u64
             t,
             goals,
             frontiers,
+            given_up,
         } => {
             let c = ch.json(w, "/plan", "gcs.Plan")?;
             let v = serde_json::json!({
                 "t": t,
-                "goals": goals.iter().map(|(k, g)| serde_json::json!({"drone": k + 1, "goal": g})).collect::<Vec<_>>(),
+                "goals": goals,
                 "frontiers": frontiers,
+                "given_up": given_up,
             });
             ch.write(
                 w,

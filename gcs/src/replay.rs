@@ -1,6 +1,8 @@
 //! `gcs replay FILE.mcap`: reruns the SLAM on a recorded mission's sensor data (camera frames,
-//! IMU heading, sonar height, the filter's poses as relocalisation hints) and reports how the
-//! result differs from what the mission produced: its final map and the poses it flew on.
+//! IMU heading, sonar height, the filter's poses as relocalisation hints), and the mission
+//! planner at each of its recorded decisions on the replayed map, and reports how the result
+//! differs from what the mission produced: its final map, the poses it flew on and the goals
+//! the drones were given.
 //!
 //! A log cut short by a crash replays up to its last readable message. Colour was recorded as
 //! JPEG, so the replay sees slightly different pixels than the live SLAM did, and its optimiser
@@ -16,10 +18,13 @@ use nav::grid::{Cell, Grid};
 use slam::system::{RobotSetup, Slam, SlamConfig};
 use slam::trajectory::Stamped;
 
-use gcs::mission_log;
+use gcs::mission_log::{self, RecordedPlan};
 use gcs::outputs;
 use gcs::record::DroneState;
+use gcs::record::Setup;
+use gcs::runtime::RuntimeConfig;
 use gcs::runtime::perception::{SensorSample, slam_frame};
+use nav::mission::{PlannerConfig, Strategy};
 
 /// Arguments of `gcs replay`.
 #[derive(Args, Debug, Clone)]
@@ -53,8 +58,83 @@ pub struct ReplayReport {
     pub loop_closures: usize,
     /// The replayed map against the mission's last recorded map.
     pub map: Option<MapComparison>,
+    /// The planner's decisions made again on the replayed map (`None`: the log records none
+    /// that can be made again, as logs before the planner's inputs were recorded).
+    pub navigation: Option<NavigationComparison>,
     /// Per drone: the replayed body trajectory against the poses the mission flew on.
     pub drones: Vec<DroneComparison>,
+}
+
+/// The mission planner run again at each recorded decision — on the replayed map as it stood
+/// then, from the drones' recorded positions, skipping the goals given up by then — against
+/// the goals the mission gave.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct NavigationComparison {
+    /// Decisions made again.
+    pub decisions: usize,
+    /// Drones' goals compared (one per exploring drone per decision).
+    pub goals: usize,
+    /// Fraction of those the replay gave the same goal (within [`SAME_GOAL_M`]; no goal in
+    /// both counts as the same).
+    pub same_goal: f64,
+    /// Median distance between the mission's goal and the replay's where both gave one,
+    /// metres.
+    pub median_goal_shift_m: Option<f64>,
+}
+
+/// Two goals this close are the same frontier (the frontier cutting's pieces are 4 m wide).
+pub const SAME_GOAL_M: f64 = 0.5;
+
+/// Tallies replayed decisions against recorded ones.
+#[derive(Debug, Default)]
+struct NavigationTally {
+    decisions: usize,
+    goals: usize,
+    same: usize,
+    shifts: Vec<f64>,
+}
+
+impl NavigationTally {
+    /// Makes `recorded` again on `grid` with the mission's planner settings.
+    fn replan(&mut self, grid: Option<&Grid>, recorded: &RecordedPlan, configs: &[PlannerConfig]) {
+        self.decisions += 1;
+        self.goals += recorded.goals.len();
+        let robots: Vec<Option<[f64; 2]>> = recorded.goals.iter().map(|g| g.position).collect();
+        let configs: Vec<PlannerConfig> = configs
+            .iter()
+            .map(|c| PlannerConfig {
+                blacklist: recorded.given_up.clone(),
+                ..c.clone()
+            })
+            .collect();
+        // No map yet, or a drone off the replayed map: every goal differs.
+        let Some(Ok(Some(plan))) =
+            grid.map(|g| nav::mission::plan_first_open(g, &robots, &configs))
+        else {
+            return;
+        };
+        for (g, r) in recorded.goals.iter().zip(&plan.robots) {
+            match (g.goal, r.goal) {
+                (None, None) => self.same += 1,
+                (Some(a), Some(b)) => {
+                    let d = (a[0] - b[0]).hypot(a[1] - b[1]);
+                    self.same += usize::from(d <= SAME_GOAL_M);
+                    self.shifts.push(d);
+                }
+                _ => {}
+            }
+        }
+    }
+
+    fn comparison(mut self) -> Option<NavigationComparison> {
+        self.shifts.sort_by(f64::total_cmp);
+        (self.decisions > 0).then(|| NavigationComparison {
+            decisions: self.decisions,
+            goals: self.goals,
+            same_goal: self.same as f64 / self.goals.max(1) as f64,
+            median_goal_shift_m: self.shifts.get(self.shifts.len() / 2).copied(),
+        })
+    }
 }
 
 /// Two 2D maps cell by cell.
@@ -135,8 +215,18 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<()> {
         n,
         args.log.display()
     );
+    let planners = planner_configs(&log.setup);
+    let mut plans = log.plans.iter().peekable();
+    let mut navigation = NavigationTally::default();
     let mut body_tracks: Vec<Vec<(f64, [f64; 2])>> = vec![vec![]; n];
     for (i, f) in log.frames.iter().enumerate() {
+        // The decisions made before this frame, on the map of the frames before it.
+        if plans.peek().is_some_and(|p| p.t < f.stamp) {
+            let grid = slam.map().project();
+            while let Some(p) = plans.next_if(|p| p.t < f.stamp) {
+                navigation.replan(grid.as_ref(), p, &planners);
+            }
+        }
         if f.drone >= n {
             continue;
         }
@@ -165,6 +255,10 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<()> {
             );
         }
     }
+    let grid = slam.map().project();
+    for p in plans {
+        navigation.replan(grid.as_ref(), p, &planners);
+    }
     slam.finish();
     let grid = slam.map().project();
     let stats = slam.stats();
@@ -178,6 +272,7 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<()> {
             (Some(a), Some(b)) => compare_maps(a, b),
             _ => None,
         },
+        navigation: navigation.comparison(),
         drones: (0..n)
             .map(|k| {
                 let (compared, rms_m) = compare_tracks(&body_tracks[k], &log.states[k]);
@@ -202,17 +297,47 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string(&report)?);
     } else {
         println!(
-            "replayed {} frames: {} keyframes, {} loops; map agreement with the mission's: {}; outputs in {}",
+            "replayed {} frames: {} keyframes, {} loops; map agreement with the mission's: {}; planner: {}; outputs in {}",
             report.frames,
             report.keyframes,
             report.loop_closures,
             report
                 .map
                 .map_or("-".into(), |m| format!("{:.1} %", m.agreement * 100.0)),
+            report
+                .navigation
+                .map_or("no decisions recorded".into(), |n| format!(
+                    "{:.1} % of {} goals the same in {} decisions",
+                    n.same_goal * 100.0,
+                    n.goals,
+                    n.decisions
+                )),
             args.out.display()
         );
     }
     Ok(())
+}
+
+/// The mission planner's settings, as the log's setup recorded them (the runtime's defaults for
+/// what older logs did not record).
+fn planner_configs(setup: &Setup) -> Vec<PlannerConfig> {
+    let radii = if setup.planner_radii.is_empty() {
+        RuntimeConfig::default().planner_radii
+    } else {
+        setup.planner_radii.clone()
+    };
+    let strategy = match setup.strategy.as_str() {
+        "greedy" => Strategy::Greedy,
+        _ => Strategy::Hungarian,
+    };
+    radii
+        .into_iter()
+        .map(|robot_radius_m| PlannerConfig {
+            strategy,
+            robot_radius_m,
+            ..PlannerConfig::default()
+        })
+        .collect()
 }
 
 /// The latest sample of a drone's state at or before `t`.
@@ -307,5 +432,60 @@ mod tests {
         }
         let part = compare_maps(&a, &b).expect("cells");
         assert!((part.agreement - 20.0 / 30.0).abs() < 1e-9, "{part:?}");
+    }
+
+    #[test]
+    fn a_decision_made_again_on_the_same_map_gives_the_same_goals_and_a_moved_goal_counts() {
+        // A 6 × 2 m room known in its west half: one frontier, on the east.
+        let mut grid = Grid::new(120, 40, 0.05, [0.0, 0.0], Cell::Unknown);
+        for y in 0..40 {
+            for x in 0..60 {
+                let wall = y == 0 || y == 39 || x == 0;
+                grid.set((x, y), if wall { Cell::Occupied } else { Cell::Free });
+            }
+        }
+        let configs = planner_configs(&Setup {
+            version: 1,
+            world: None,
+            strategy: "hungarian".into(),
+            planner_radii: vec![],
+            drones: vec![],
+        });
+        assert_eq!(configs.len(), RuntimeConfig::default().planner_radii.len());
+        let robots = [Some([0.5, 1.0])];
+        let live = nav::mission::plan_first_open(&grid, &robots, &configs)
+            .expect("plans")
+            .expect("a plan");
+        let goal = live.robots[0].goal.expect("the frontier is a goal");
+        let recorded = |goal: Option<[f64; 2]>, given_up: Vec<[f64; 2]>| RecordedPlan {
+            t: 1.0,
+            goals: vec![gcs::record::PlannedGoal {
+                drone: 0,
+                position: robots[0],
+                goal,
+            }],
+            given_up,
+        };
+        let mut tally = NavigationTally::default();
+        tally.replan(Some(&grid), &recorded(Some(goal), vec![]), &configs);
+        // The mission had given that goal up: the replay must skip it too (nothing else left).
+        tally.replan(Some(&grid), &recorded(None, vec![goal]), &configs);
+        // A mission that sent the drone 2 m elsewhere.
+        tally.replan(
+            Some(&grid),
+            &recorded(Some([goal[0], goal[1] + 2.0]), vec![]),
+            &configs,
+        );
+        // No replayed map yet.
+        tally.replan(None, &recorded(Some(goal), vec![]), &configs);
+        let c = tally.comparison().expect("decisions");
+        assert_eq!((c.decisions, c.goals), (4, 4));
+        assert!((c.same_goal - 0.5).abs() < 1e-9, "{c:?}");
+        // Shifts 0 and 2 m: the upper median.
+        assert!(
+            (c.median_goal_shift_m.expect("shifts") - 2.0).abs() < 1e-9,
+            "{c:?}"
+        );
+        assert!(NavigationTally::default().comparison().is_none());
     }
 }

@@ -152,7 +152,7 @@ fn two_drones_explore_the_default_world_land_and_write_their_outputs() {
 }
 
 /// `gcs replay` on the mission's log maps the recorded frames on the recorded true poses again
-/// and gets the mission's map; a log cut short (a crash) still replays; a file that is no log
+/// and gets the mission's map and its planner decisions; a log cut short (a crash) still replays; a file that is no log
 /// is refused with a reason.
 fn replay_reproduces_the_map(out: &Path) {
     let log = out.join("mission.mcap");
@@ -175,6 +175,10 @@ fn replay_reproduces_the_map(out: &Path) {
     assert_eq!(r["truncated"], false, "{r}");
     assert!(number(&r["frames"]) > 1000.0, "{r}");
     assert!(number(&r["map"]["agreement"]) >= 0.99, "{r}");
+    // The planner, run again at every recorded decision on the replayed map, gives the drones
+    // the goals the mission gave them.
+    assert!(number(&r["navigation"]["decisions"]) > 30.0, "{r}");
+    assert!(number(&r["navigation"]["same_goal"]) >= 0.95, "{r}");
     assert!(nav::grid::Grid::load(dir.join("map.yaml")).is_ok());
     // The first 60 % of the file, as a writer killed mid-mission leaves it.
     let bytes = std::fs::read(&log).expect("mission.mcap");

@@ -117,6 +117,27 @@ pub enum PlanError {
     },
 }
 
+/// One planner step with a fallback: plans with each configuration in turn (a mission lists
+/// them widest robot radius first) and keeps the first plan that leaves a frontier to explore,
+/// else the last one — a map whose last frontiers lie behind a narrow door is explored with a
+/// thinner margin rather than declared complete. `None` only when `configs` is empty.
+pub fn plan_first_open(
+    map: &Grid,
+    robots: &[Option<[f64; 2]>],
+    configs: &[PlannerConfig],
+) -> Result<Option<Plan>, PlanError> {
+    let mut chosen = None;
+    for config in configs {
+        let plan = plan(map, robots, config)?;
+        let open = !plan.complete;
+        chosen = Some(plan);
+        if open {
+            break;
+        }
+    }
+    Ok(chosen)
+}
+
 /// One planner step. `robots[i]` is robot i's position in the map frame, `None` if its pose is
 /// invalid (it is planned to hover).
 pub fn plan(

@@ -27,7 +27,7 @@ use nav::mission::{PlannerConfig, Strategy};
 use slam::system::{RobotState, Slam};
 
 use crate::clock::Clock;
-use crate::record::{Record, Recorder};
+use crate::record::{PlannedGoal, Record, Recorder};
 use drone::{Drone, DroneConfig, DroneEvent, DroneSpec, Phase};
 use perception::{CameraFrame, Perception, PerceptionResult, SensorLog, SensorSample, SlamView};
 use trail::Trail;
@@ -747,22 +747,13 @@ impl Mission {
                 ..PlannerConfig::default()
             })
             .collect();
-        let mut chosen = None;
-        for p in &planners {
-            match nav::mission::plan(&grid, &robots, p) {
-                Ok(plan) if !plan.complete => {
-                    chosen = Some(plan);
-                    break;
-                }
-                Ok(plan) => chosen = Some(plan),
-                Err(e) => {
-                    tracing::warn!("planner: {e}");
-                    return;
-                }
+        let plan = match nav::mission::plan_first_open(&grid, &robots, &planners) {
+            Ok(Some(plan)) => plan,
+            Ok(None) => return,
+            Err(e) => {
+                tracing::warn!("planner: {e}");
+                return;
             }
-        }
-        let Some(plan) = chosen else {
-            return;
         };
         self.frontiers = plan
             .frontiers
@@ -781,9 +772,14 @@ impl Mission {
                 goals: exploring
                     .iter()
                     .enumerate()
-                    .map(|(i, &k)| (k, plan.robots[i].goal))
+                    .map(|(i, &k)| PlannedGoal {
+                        drone: k,
+                        position: robots[i],
+                        goal: plan.robots[i].goal,
+                    })
                     .collect(),
                 frontiers: self.frontiers.clone(),
+                given_up: self.blacklist.clone(),
             });
             r.send(Record::Grid {
                 t: now,
