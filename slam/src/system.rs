@@ -34,6 +34,7 @@ use image::GrayImage;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
 use crate::dataset::Pinhole;
+use crate::features::Keypoint;
 use crate::frontend::{FrontendConfig, Observation, Registration, observe, register};
 use crate::livemap::{LiveMap, MapHandle, NodeCloud, RebuildStatus};
 use crate::occupancy::{DepthImage, OccupancyConfig, depth_cloud};
@@ -47,6 +48,13 @@ use crate::trajectory::Stamped;
 pub struct SlamConfig {
     /// Features and pairwise registration.
     pub frontend: FrontendConfig,
+    /// When the reference keyframe alone no longer registers a frame, it is tracked (or
+    /// relocalised, when lost) against the reference's local map: its features together with
+    /// those of up to this many keyframes of the same map frame (any robot's) that look the
+    /// same way from within [`SlamConfig::local_map_radius`] of the prediction. 0: off.
+    pub local_map_keyframes: usize,
+    /// How far from the predicted camera a keyframe of the local map may be, metres.
+    pub local_map_radius: f64,
     /// A new keyframe after this much translation from the reference, metres…
     pub keyframe_translation: f64,
     /// …or this much rotation, radians.
@@ -148,6 +156,8 @@ impl Default for SlamConfig {
     fn default() -> Self {
         Self {
             frontend: FrontendConfig::default(),
+            local_map_keyframes: 5,
+            local_map_radius: 2.0,
             keyframe_translation: 0.15,
             keyframe_rotation: 12f64.to_radians(),
             max_frame_translation: 0.5,
@@ -1046,6 +1056,16 @@ impl Slam {
                     Err(e) => add_reason(&mut why, format!("previous frame: {e}")),
                 }
             }
+            if found.is_none()
+                && let Some(p) = predicted
+                && let Some(local) = self.local_map(reference, &p)
+            {
+                let guess = self.nodes[reference].pose.inverse() * p;
+                match register(&local, &observation, Some(&guess), frontend, seed) {
+                    Ok(reg) => found = Some((Some(reference), reg)),
+                    Err(e) => add_reason(&mut why, format!("local map: {e}")),
+                }
+            }
             if let Some((_, reg)) = &found {
                 let base = match found.as_ref().and_then(|(n, _)| *n) {
                     Some(n) => self.nodes[n].pose,
@@ -1081,15 +1101,19 @@ impl Slam {
             } else {
                 self.config.relocalisation_min_inliers
             };
-            for n in self.relocalisation_candidates(k, &around, &observation) {
+            // Lost with a prediction: first the local map around the last reference, then
+            // keyframe by keyframe.
+            let local = predicted
+                .filter(|_| !tracking)
+                .and_then(|p| self.local_map(reference, &p))
+                .map(|o| (reference, Arc::new(o)));
+            let candidates = self
+                .relocalisation_candidates(k, &around, &observation)
+                .into_iter()
+                .map(|n| (n, self.nodes[n].observation.clone()));
+            for (n, against) in local.into_iter().chain(candidates) {
                 let guess = predicted.map(|p| self.nodes[n].pose.inverse() * p);
-                match register(
-                    &self.nodes[n].observation,
-                    &observation,
-                    guess.as_ref(),
-                    &wide,
-                    seed,
-                ) {
+                match register(&against, &observation, guess.as_ref(), &wide, seed) {
                     Ok(reg) if reg.inliers >= needed => {
                         let pose = self.nodes[n].pose * reg.reference_from_frame;
                         // A registration far from a good prediction is a wrong match. While
@@ -1579,6 +1603,58 @@ impl Slam {
         }
     }
 
+    /// The local map of keyframe `reference` for a camera predicted at `predicted`: the
+    /// reference's features with those of up to [`SlamConfig::local_map_keyframes`] keyframes
+    /// of its map frame (any robot's) whose cameras lie within
+    /// [`SlamConfig::local_map_radius`] of the prediction and look within 45° of its way, each
+    /// point moved into the reference's camera (its keypoint the point's projection there).
+    /// `None` when no other keyframe qualifies.
+    fn local_map(&self, reference: usize, predicted: &Isometry3<f64>) -> Option<Observation> {
+        if self.config.local_map_keyframes == 0 {
+            return None;
+        }
+        let base = &self.nodes[reference];
+        let here = predicted.translation.vector;
+        let axis = predicted.rotation * Vector3::z();
+        let mut near: Vec<(f64, usize)> = self
+            .nodes
+            .iter()
+            .enumerate()
+            .filter(|&(m, o)| {
+                m != reference
+                    && o.frame == base.frame
+                    && (o.pose.rotation * Vector3::z()).angle(&axis) < std::f64::consts::FRAC_PI_4
+            })
+            .map(|(m, o)| ((o.pose.translation.vector - here).norm(), m))
+            .filter(|&(d, _)| d < self.config.local_map_radius)
+            .collect();
+        if near.is_empty() {
+            return None;
+        }
+        near.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut local = (*base.observation).clone();
+        let camera = local.camera;
+        let base_from_map = base.pose.inverse();
+        for &(_, m) in near.iter().take(self.config.local_map_keyframes) {
+            let o = &self.nodes[m].observation;
+            let base_from_m = base_from_map * self.nodes[m].pose;
+            for ((k, d), p) in o.keypoints.iter().zip(&o.descriptors).zip(&o.points) {
+                let q = base_from_m * p;
+                if q.z < 0.1 {
+                    continue;
+                }
+                local.keypoints.push(Keypoint {
+                    x: (camera.fx * q.x / q.z + camera.cx) as f32,
+                    y: (camera.fy * q.y / q.z + camera.cy) as f32,
+                    ..*k
+                });
+                local.descriptors.push(*d);
+                local.points.push(q);
+            }
+        }
+        Some(local)
+    }
+
     /// Candidates to relocalise robot `k` against: its recent keyframes, keyframes of its frame
     /// near `around`, and look-alike keyframes of its frame.
     fn relocalisation_candidates(
@@ -1887,7 +1963,8 @@ fn lost(why: String) -> FrameReport {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::Matrix6;
+    use crate::features::Descriptor;
+    use nalgebra::{Matrix6, Point3, Translation3};
 
     #[test]
     fn a_link_from_a_degenerate_registration_still_holds_every_direction() {
@@ -1994,5 +2071,128 @@ mod tests {
                 k - 1
             );
         }
+    }
+
+    /// What a camera at `map_from_camera` sees of `scene` (map points with their
+    /// descriptors): each point in its optical frame, its keypoint the point's projection.
+    fn seen(scene: &[(Point3<f64>, Descriptor)], map_from_camera: &Isometry3<f64>) -> Observation {
+        let camera = crate::dataset::Pinhole::TUM_FR1;
+        let mut o = Observation {
+            keypoints: vec![],
+            descriptors: vec![],
+            points: vec![],
+            camera,
+        };
+        for (p, d) in scene {
+            let q = map_from_camera.inverse_transform_point(p);
+            let (u, v) = (
+                camera.fx * q.x / q.z + camera.cx,
+                camera.fy * q.y / q.z + camera.cy,
+            );
+            if q.z < 0.3 || !(20.0..620.0).contains(&u) || !(20.0..460.0).contains(&v) {
+                continue;
+            }
+            o.keypoints.push(Keypoint {
+                x: u as f32,
+                y: v as f32,
+                angle: 0.0,
+                score: 1.0,
+            });
+            o.descriptors.push(*d);
+            o.points.push(q);
+        }
+        o
+    }
+
+    #[test]
+    fn a_frame_that_shares_too_little_with_its_reference_registers_on_the_local_map() {
+        // Two walls of features 2 m ahead: keyframe A sees the left one, B (1 m to its right,
+        // looking the same way) the right one. A frame between them sees 10 points of each:
+        // too few to register on A alone, enough on A's local map, which holds B's points
+        // moved into A's camera. Keyframes looking back, in another map frame or far away are
+        // left out.
+        let mut seed = 7u64;
+        let mut bits = || {
+            seed = seed
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            seed
+        };
+        // Camera optical axes along the map's x (looking "ahead"), y to the right is -y map.
+        let look = |x: f64, y: f64| {
+            Isometry3::from_parts(
+                Translation3::new(x, y, 1.0),
+                UnitQuaternion::from_matrix(&nalgebra::Matrix3::new(
+                    0.0, 0.0, 1.0, //
+                    -1.0, 0.0, 0.0, //
+                    0.0, -1.0, 0.0,
+                )),
+            )
+        };
+        let wall = |y0: f64, bits: &mut dyn FnMut() -> u64| -> Vec<(Point3<f64>, Descriptor)> {
+            (0..40)
+                .map(|i| {
+                    let (row, col) = (f64::from(i / 8), f64::from(i % 8));
+                    (
+                        Point3::new(3.0 + 0.1 * (col % 3.0), y0 - 0.08 * col, 0.6 + 0.15 * row),
+                        [bits(), bits(), bits(), bits()],
+                    )
+                })
+                .collect()
+        };
+        let left = wall(0.9, &mut bits);
+        let right = wall(-0.4, &mut bits);
+        let (a, b) = (look(0.0, 0.0), look(0.0, -1.0));
+        let observation_a = Arc::new(seen(&left, &a));
+        let observation_b = Arc::new(seen(&right, &b));
+        assert!(observation_a.len() >= 30 && observation_b.len() >= 30);
+        let mut slam = Slam::new(
+            SlamConfig::default(),
+            vec![RobotSetup {
+                body_from_camera: Isometry3::identity(),
+                start: None,
+            }],
+        );
+        let node = |pose, frame, observation: &Arc<Observation>| Node {
+            robot: 0,
+            stamp: 0.0,
+            frame,
+            pose,
+            parent: None,
+            heading: None,
+            observation: observation.clone(),
+            cloud: Arc::default(),
+        };
+        let back = a * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), std::f64::consts::PI);
+        slam.nodes.push(node(a, 0, &observation_a));
+        slam.nodes.push(node(b, 0, &observation_b));
+        slam.nodes.push(node(back, 0, &observation_b));
+        slam.nodes.push(node(b, 1, &observation_b));
+        slam.nodes.push(node(look(6.0, -1.0), 0, &observation_b));
+        // The frame: 10 points of each wall, and 15 it alone sees.
+        let f = look(0.1, -0.5);
+        let mut scene: Vec<_> = left[..10].to_vec();
+        scene.extend_from_slice(&right[..10]);
+        scene.extend(wall(0.2, &mut bits).into_iter().take(15));
+        let frame = seen(&scene, &f);
+        assert!(frame.len() >= 30, "{}", frame.len());
+        let guess = a.inverse() * f;
+        let config = FrontendConfig::default();
+        assert!(register(&observation_a, &frame, Some(&guess), &config, 1).is_err());
+        let local = slam.local_map(0, &f).expect("a local map");
+        // A's own points and B's once: not those of the keyframe looking back, in the other
+        // map frame or 6 m away.
+        assert_eq!(local.len(), observation_a.len() + observation_b.len());
+        for (p, k) in local.points.iter().zip(&local.keypoints) {
+            let u = local.camera.fx * p.x / p.z + local.camera.cx;
+            assert!((f64::from(k.x) - u).abs() < 1e-3);
+        }
+        let reg = register(&local, &frame, Some(&guess), &config, 1).expect("registers");
+        assert!(reg.inliers >= 20, "{} inliers", reg.inliers);
+        let err = guess.inverse() * reg.reference_from_frame;
+        assert!(err.translation.vector.norm() < 0.01, "{err}");
+        // Off, there is no local map.
+        slam.config.local_map_keyframes = 0;
+        assert!(slam.local_map(0, &f).is_none());
     }
 }
