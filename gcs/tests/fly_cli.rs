@@ -5,17 +5,15 @@
 
 mod common;
 
+use std::path::Path;
 use std::sync::Arc;
 
 use common::{gcs, serve_fleet};
 use sitl::bridge::{BridgeConfig, BridgedVehicle, CameraBridge};
 use sitl::{EndpointSpec, Protocol, SimConfig, Sitl, SitlConfig, World};
 
-#[test]
-fn fly_explores_with_an_external_fleet_over_mavlink_and_the_shield_and_lands() {
-    let dir = std::env::temp_dir().join(format!("gcs-fly-{}", std::process::id()));
-    let (sitl, fleet) = serve_fleet(&dir, &[Protocol::Mavlink, Protocol::Shield]);
-    let out = dir.join("out");
+/// Runs `gcs fly` on `fleet` for 25 s into `out` and returns its summary.
+fn fly(fleet: &Path, out: &Path) -> serde_json::Value {
     let run = gcs(&[
         "fly",
         "--config",
@@ -28,7 +26,15 @@ fn fly_explores_with_an_external_fleet_over_mavlink_and_the_shield_and_lands() {
     ]);
     let stderr = String::from_utf8_lossy(&run.stderr);
     assert!(run.status.success(), "{stderr}");
-    let summary: serde_json::Value = serde_json::from_slice(&run.stdout).expect("JSON");
+    serde_json::from_slice(&run.stdout).expect("JSON")
+}
+
+#[test]
+fn fly_explores_with_an_external_fleet_over_mavlink_and_the_shield_and_lands() {
+    let dir = std::env::temp_dir().join(format!("gcs-fly-{}", std::process::id()));
+    let (sitl, fleet) = serve_fleet(&dir, &[Protocol::Mavlink, Protocol::Shield]);
+    let out = dir.join("out");
+    let summary = fly(&fleet, &out);
     assert_eq!(summary["outcome"], "timed out", "{summary}");
     assert_eq!(summary["drones"][0]["name"], "alpha", "{summary}");
     for d in summary["drones"].as_array().expect("drones") {
@@ -136,19 +142,7 @@ fn fly_explores_with_an_autopilot_whose_camera_the_bridge_renders_at_its_reporte
     )
     .expect("fleet file");
     let out = dir.join("out");
-    let run = gcs(&[
-        "fly",
-        "--config",
-        fleet.to_str().expect("utf-8 path"),
-        "--timeout",
-        "25",
-        "--json",
-        "--out",
-        out.to_str().expect("utf-8 path"),
-    ]);
-    let stderr = String::from_utf8_lossy(&run.stderr);
-    assert!(run.status.success(), "{stderr}");
-    let summary: serde_json::Value = serde_json::from_slice(&run.stdout).expect("JSON");
+    let summary = fly(&fleet, &out);
     std::fs::write("/tmp/fb-stderr.log", &run.stderr).ok();
     let d = &summary["drones"][0];
     assert_eq!(d["final_phase"], "landed", "{summary}");

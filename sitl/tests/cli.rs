@@ -21,6 +21,21 @@ fn sitl(args: &[&str]) -> (bool, String) {
     (out.status.success(), text)
 }
 
+/// Connects to the camera stream a `sitl run` or `sitl camera` process announced.
+fn camera_stream(process: &mut SitlProcess) -> TcpStream {
+    let line = process.wait_for("camera stream on tcp", Duration::from_secs(1));
+    let addr = line
+        .split_once("camera stream on tcp ")
+        .and_then(|(_, rest)| rest.split_whitespace().next())
+        .unwrap_or_else(|| panic!("no address in {line:?}"))
+        .to_owned();
+    let stream = TcpStream::connect(&addr).expect("connect to the camera stream");
+    stream
+        .set_read_timeout(Some(Duration::from_secs(10)))
+        .expect("timeout");
+    stream
+}
+
 #[test]
 fn the_camera_stream_delivers_timestamped_rgbd_frames_of_every_vehicle() {
     let a = format!("mavlink@tcpin:127.0.0.1:{}", free_tcp_port());
@@ -40,16 +55,7 @@ fn the_camera_stream_delivers_timestamped_rgbd_frames_of_every_vehicle() {
         "--duration",
         "60",
     ]);
-    let line = sitl.wait_for("camera stream on tcp", Duration::from_secs(1));
-    let addr = line
-        .split_whitespace()
-        .nth(5)
-        .unwrap_or_else(|| panic!("no address in {line:?}"))
-        .to_owned();
-    let mut stream = TcpStream::connect(&addr).expect("connect to the camera stream");
-    stream
-        .set_read_timeout(Some(Duration::from_secs(10)))
-        .expect("timeout");
+    let mut stream = camera_stream(&mut sitl);
     let mut last = [None, None];
     for _ in 0..8 {
         let f = RgbdFrame::read_from(&mut stream).expect("a frame");
@@ -240,16 +246,7 @@ fn the_camera_bridge_renders_an_autopilot_at_the_pose_it_reports() {
         "--duration",
         "60",
     ]);
-    let line = bridge.wait_for("camera stream on tcp", Duration::from_secs(1));
-    let addr = line
-        .split_whitespace()
-        .nth(6)
-        .unwrap_or_else(|| panic!("no address in {line:?}"))
-        .to_owned();
-    let mut stream = TcpStream::connect(&addr).expect("connect to the camera stream");
-    stream
-        .set_read_timeout(Some(Duration::from_secs(10)))
-        .expect("timeout");
+    let mut stream = camera_stream(&mut bridge);
     let frame = RgbdFrame::read_from(&mut stream).expect("a frame");
     assert_eq!((frame.vehicle, frame.width, frame.height), (0, 320, 240));
 

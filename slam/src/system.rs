@@ -1614,28 +1614,24 @@ impl Slam {
             return None;
         }
         let base = &self.nodes[reference];
-        let here = predicted.translation.vector;
-        let axis = predicted.rotation * Vector3::z();
-        let mut near: Vec<(f64, usize)> = self
-            .nodes
-            .iter()
-            .enumerate()
-            .filter(|&(m, o)| {
-                m != reference
-                    && o.frame == base.frame
-                    && (o.pose.rotation * Vector3::z()).angle(&axis) < std::f64::consts::FRAC_PI_4
-            })
-            .map(|(m, o)| ((o.pose.translation.vector - here).norm(), m))
-            .filter(|&(d, _)| d < self.config.local_map_radius)
+        let near: Vec<usize> = self
+            .keyframes_near(
+                base.frame,
+                predicted,
+                self.config.local_map_radius,
+                std::f64::consts::FRAC_PI_4,
+            )
+            .into_iter()
+            .filter(|&m| m != reference)
+            .take(self.config.local_map_keyframes)
             .collect();
         if near.is_empty() {
             return None;
         }
-        near.sort_by(|a, b| a.0.total_cmp(&b.0));
         let mut local = (*base.observation).clone();
         let camera = local.camera;
         let base_from_map = base.pose.inverse();
-        for &(_, m) in near.iter().take(self.config.local_map_keyframes) {
+        for m in near {
             let o = &self.nodes[m].observation;
             let base_from_m = base_from_map * self.nodes[m].pose;
             for ((k, d), p) in o.keypoints.iter().zip(&o.descriptors).zip(&o.points) {
@@ -1653,6 +1649,31 @@ impl Slam {
             }
         }
         Some(local)
+    }
+
+    /// Keyframes of map frame `frame` whose cameras lie within `radius` metres of `camera` and
+    /// look within `max_angle` radians of its way, nearest first.
+    fn keyframes_near(
+        &self,
+        frame: usize,
+        camera: &Isometry3<f64>,
+        radius: f64,
+        max_angle: f64,
+    ) -> Vec<usize> {
+        let here = camera.translation.vector;
+        let axis = camera.rotation * Vector3::z();
+        let mut near: Vec<(f64, usize)> = self
+            .nodes
+            .iter()
+            .enumerate()
+            .filter(|(_, o)| {
+                o.frame == frame && (o.pose.rotation * Vector3::z()).angle(&axis) < max_angle
+            })
+            .map(|(m, o)| ((o.pose.translation.vector - here).norm(), m))
+            .filter(|&(d, _)| d < radius)
+            .collect();
+        near.sort_by(|a, b| a.0.total_cmp(&b.0));
+        near.into_iter().map(|(_, m)| m).collect()
     }
 
     /// Candidates to relocalise robot `k` against: its recent keyframes, keyframes of its frame
@@ -1674,20 +1695,11 @@ impl Slam {
         for &n in r.nodes.iter().rev().take(limit / 3 + 1) {
             push(n, &mut out);
         }
-        let here = around.translation.vector;
-        let axis = around.rotation * Vector3::z();
-        let mut near: Vec<(f64, usize)> = self
-            .nodes
-            .iter()
-            .enumerate()
-            .filter(|(_, o)| {
-                o.frame == r.frame && (o.pose.rotation * Vector3::z()).angle(&axis) < 1.0
-            })
-            .map(|(m, o)| ((o.pose.translation.vector - here).norm(), m))
-            .filter(|&(d, _)| d < 3.0)
-            .collect();
-        near.sort_by(|a, b| a.0.total_cmp(&b.0));
-        for &(_, n) in near.iter().take(limit / 3 + 1) {
+        for n in self
+            .keyframes_near(r.frame, around, 3.0, 1.0)
+            .into_iter()
+            .take(limit / 3 + 1)
+        {
             push(n, &mut out);
         }
         let nodes = &self.nodes;
