@@ -143,7 +143,6 @@ fn fly_explores_with_an_autopilot_whose_camera_the_bridge_renders_at_its_reporte
     .expect("fleet file");
     let out = dir.join("out");
     let summary = fly(&fleet, &out);
-    std::fs::write("/tmp/fb-stderr.log", &run.stderr).ok();
     let d = &summary["drones"][0];
     assert_eq!(d["final_phase"], "landed", "{summary}");
     assert!(d["path_length_m"].as_f64().unwrap_or(0.0) > 1.0, "{d}");
