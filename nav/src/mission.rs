@@ -5,7 +5,8 @@ use crate::assignment::{greedy, hungarian};
 use crate::frontier::{Frontier, frontiers};
 use crate::grid::{Cell, CellXY, Grid};
 use crate::inflate::inflate;
-use crate::search::{Graph, UNREACHABLE, astar, dijkstra, metres, nearest_free, simplify};
+use crate::clearance::centred_path;
+use crate::search::{Graph, UNREACHABLE, dijkstra, metres, nearest_free};
 use crate::vantage::vantage;
 
 /// How robots are matched to frontiers.
@@ -42,6 +43,10 @@ pub struct PlannerConfig {
     pub look_around_room_m: f64,
     /// ... found at most this far from its frontier's goal, metres.
     pub look_around_shift_m: f64,
+    /// Paths keep this far from the inflated obstacles where they can (through the middle of
+    /// a door rather than along its frame), metres: see [`crate::clearance`]. 0: shortest
+    /// paths.
+    pub comfort_m: f64,
 }
 
 impl Default for PlannerConfig {
@@ -55,6 +60,7 @@ impl Default for PlannerConfig {
             blacklist_radius_m: 0.5,
             look_around_room_m: 0.7,
             look_around_shift_m: 1.5,
+            comfort_m: 0.3,
         }
     }
 }
@@ -263,14 +269,13 @@ pub fn plan(
                 config.look_around_room_m,
                 config.look_around_shift_m,
             );
-            let (Some(cost), Some((_, cells))) = (raw[r][f], astar(&inflated, origin, look_from))
-            else {
+            let (Some(cost), Some(cells)) = (
+                raw[r][f],
+                centred_path(&inflated, origin, look_from, config.comfort_m),
+            ) else {
                 return hover("assigned frontier unreachable");
             };
-            let path = simplify(&inflated, &cells)
-                .into_iter()
-                .map(|c| inflated.center_of(c))
-                .collect();
+            let path = cells.into_iter().map(|c| inflated.center_of(c)).collect();
             RobotPlan {
                 frontier: Some(f),
                 cost_m: Some(cost),
@@ -292,22 +297,22 @@ pub fn plan(
 }
 
 /// A collision-free route from `from` to `to` (map frame, metres) on `map` with obstacles grown
-/// by `robot_radius_m`: A* over free cells (8-connected), both ends moved to the nearest free
-/// cell, simplified to straight segments. `None` when either end is off the map or no route
-/// exists. The global planner for a drone flying home.
+/// by `robot_radius_m`, keeping `comfort_m` more where it can ([`centred_path`]), both ends
+/// moved to the nearest free cell, in straight segments. `None` when either end is off the map
+/// or no route exists. The global planner for a drone flying home.
 pub fn route(
     map: &Grid,
     from: [f64; 2],
     to: [f64; 2],
     robot_radius_m: f64,
+    comfort_m: f64,
 ) -> Option<Vec<[f64; 2]>> {
     let inflated = inflate(map, robot_radius_m);
     let reach = (robot_radius_m / map.resolution()).ceil() as usize * 2 + 2;
     let a = nearest_free(&inflated, map.cell_of(from)?, reach)?;
     let b = nearest_free(&inflated, map.cell_of(to)?, reach)?;
-    let (_, cells) = astar(&inflated, a, b)?;
     Some(
-        simplify(&inflated, &cells)
+        centred_path(&inflated, a, b, comfort_m)?
             .into_iter()
             .map(|c| inflated.center_of(c))
             .collect(),

@@ -118,7 +118,7 @@ impl Graph {
 }
 
 /// The moves from a cell that stay on free cells and do not cut a corner: `(neighbour, cost)`.
-fn moves(grid: &Grid, (x, y): CellXY) -> impl Iterator<Item = (CellXY, u32)> + '_ {
+pub(crate) fn moves(grid: &Grid, (x, y): CellXY) -> impl Iterator<Item = (CellXY, u32)> + '_ {
     const STEPS: [(isize, isize); 8] = [
         (1, 0),
         (-1, 0),

@@ -818,7 +818,13 @@ impl Mission {
             let (Some(p), Some(home)) = (d.pose(), d.goal) else {
                 continue;
             };
-            match nav::mission::route(&grid, [p[0], p[1]], home, radius) {
+            match nav::mission::route(
+                &grid,
+                [p[0], p[1]],
+                home,
+                radius,
+                PlannerConfig::default().comfort_m,
+            ) {
                 Some(path) => d.set_home_path(path),
                 None => {
                     // No known way home: land where it is.
