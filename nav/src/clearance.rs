@@ -21,6 +21,11 @@ use crate::search::{DIAGONAL, STRAIGHT, UNREACHABLE, astar, line_of_sight};
 /// The path searched within this many cells of the shortest path's bounding box.
 const WINDOW_MARGIN: usize = 40;
 
+/// Only this many cells of the shortest path are centred (10 m at 5 cm), the rest kept as it is:
+/// a robot replans long before it gets there, and the search's window stays small on a large
+/// building.
+const HORIZON: usize = 200;
+
 /// A step next to an obstacle costs this many times a step in the open, tapering to nothing at
 /// the comfort distance.
 const NEAR_WEIGHT: f64 = 2.0;
@@ -39,7 +44,10 @@ impl Clearance {
     fn new(grid: &Grid, x0: usize, y0: usize, width: usize, height: usize) -> Self {
         // One cell of border round the window: the map beyond it, or solid off the map.
         let blocked = GrayImage::from_fn(width as u32 + 2, height as u32 + 2, |i, j| {
-            let (x, y) = ((x0 + i as usize).checked_sub(1), (y0 + j as usize).checked_sub(1));
+            let (x, y) = (
+                (x0 + i as usize).checked_sub(1),
+                (y0 + j as usize).checked_sub(1),
+            );
             let free = match (x, y) {
                 (Some(x), Some(y)) if x < grid.width() && y < grid.height() => {
                     grid.get((x, y)) == Cell::Free
@@ -98,8 +106,9 @@ impl Clearance {
 /// A path from `start` to `goal` over the free cells of `inflated` that keeps `comfort_m` from
 /// anything not free where it can: A* whose steps cost more the nearer they come (up to
 /// [`NEAR_WEIGHT`] extra next to an obstacle), searched within a window around the shortest
-/// path, then shortened to straight segments where a shortcut keeps the clearance of the part
-/// it replaces. Both ends included; `None` when no path exists.
+/// path's first [`HORIZON`] cells, then shortened to straight segments where a shortcut keeps
+/// the clearance of the part it replaces; beyond the horizon, the shortest path simplified.
+/// Both ends included; `None` when no path exists.
 pub fn centred_path(
     inflated: &Grid,
     start: CellXY,
@@ -111,8 +120,10 @@ pub fn centred_path(
     if comfort <= 0.0 || shortest.len() < 2 {
         return Some(crate::search::simplify(inflated, &shortest));
     }
+    let cut = shortest.len().min(HORIZON + 1) - 1;
+    let (near, beyond) = (&shortest[..=cut], &shortest[cut..]);
     let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
-    for &(x, y) in &shortest {
+    for &(x, y) in near {
         (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x), y1.max(y));
     }
     let (x0, y0) = (
@@ -124,8 +135,16 @@ pub fn centred_path(
         (y1 + WINDOW_MARGIN).min(inflated.height() - 1),
     );
     let clearance = Clearance::new(inflated, x0, y0, x1 - x0 + 1, y1 - y0 + 1);
-    let cells = search(inflated, &clearance, start, goal, comfort)?;
-    Some(shorten(inflated, &clearance, &cells))
+    let cells = search(inflated, &clearance, start, near[cut], comfort)?;
+    let mut path = shorten(inflated, &clearance, &cells);
+    if beyond.len() > 1 {
+        path.extend(
+            crate::search::simplify(inflated, beyond)
+                .into_iter()
+                .skip(1),
+        );
+    }
+    Some(path)
 }
 
 /// A* within the clearance window with the comfort cost; the octile heuristic stays admissible
@@ -156,13 +175,19 @@ fn search(
         if g != dist[u] {
             continue;
         }
-        let cell = (clearance.x0 + u % clearance.width, clearance.y0 + u / clearance.width);
+        let cell = (
+            clearance.x0 + u % clearance.width,
+            clearance.y0 + u / clearance.width,
+        );
         if cell == goal {
             let mut path = vec![goal];
             let mut i = u;
             while parent[i] != usize::MAX {
                 i = parent[i];
-                path.push((clearance.x0 + i % clearance.width, clearance.y0 + i / clearance.width));
+                path.push((
+                    clearance.x0 + i % clearance.width,
+                    clearance.y0 + i / clearance.width,
+                ));
             }
             path.reverse();
             return Some(path);
@@ -274,11 +299,21 @@ mod tests {
             from_the_frame(&map, &shortest),
             from_the_frame(&map, &centred),
         );
-        assert!(near < 0.3, "the shortest path passes {near:.2} m from the frame");
-        assert!(far > 0.35, "the centred path passes {far:.2} m from the frame");
+        assert!(
+            near < 0.3,
+            "the shortest path passes {near:.2} m from the frame"
+        );
+        assert!(
+            far > 0.35,
+            "the centred path passes {far:.2} m from the frame"
+        );
         // Both ends kept, every segment on free cells, and not much longer.
         assert_eq!((centred[0], *centred.last().expect("cells")), (a, b));
-        assert!(centred.windows(2).all(|w| line_of_sight(&inflated, w[0], w[1])));
+        assert!(
+            centred
+                .windows(2)
+                .all(|w| line_of_sight(&inflated, w[0], w[1]))
+        );
         let length = |p: &[CellXY]| -> f64 {
             p.windows(2)
                 .map(|w| {
@@ -301,5 +336,27 @@ mod tests {
         let (_, cells) = astar(&inflated, (20, 8), (100, 70)).expect("a path");
         assert_eq!(plain, crate::search::simplify(&inflated, &cells));
         assert!(centred_path(&inflated, (20, 8), (59, 8), 0.3).is_none());
+    }
+
+    #[test]
+    fn a_long_path_is_centred_near_the_robot_and_kept_beyond() {
+        // A corridor 30 m long: beyond the horizon the path is the shortest one, and it ends
+        // where it should.
+        let mut map = Grid::new(620, 40, 0.05, [0.0, 0.0], Cell::Free);
+        for x in 0..620 {
+            for y in [0, 39] {
+                map.set((x, y), Cell::Occupied);
+            }
+        }
+        let inflated = inflate(&map, 0.25);
+        let path = centred_path(&inflated, (10, 10), (600, 30), 0.3).expect("a path");
+        assert_eq!(
+            (path[0], *path.last().expect("cells")),
+            ((10, 10), (600, 30))
+        );
+        assert!(
+            path.windows(2)
+                .all(|w| line_of_sight(&inflated, w[0], w[1]))
+        );
     }
 }
