@@ -212,9 +212,6 @@ fn search(
 /// segment keeps at least the least clearance of the path between them (less half a cell of
 /// rounding), found by doubling then bisecting as [`crate::search::simplify`] does.
 fn shorten(grid: &Grid, clearance: &Clearance, path: &[CellXY]) -> Vec<CellXY> {
-    let Some(&first) = path.first() else {
-        return vec![];
-    };
     let keeps = |i: usize, j: usize| {
         let least = path[i..=j]
             .iter()
@@ -222,29 +219,7 @@ fn shorten(grid: &Grid, clearance: &Clearance, path: &[CellXY]) -> Vec<CellXY> {
             .fold(f64::INFINITY, f64::min);
         line_of_sight(grid, path[i], path[j]) && clearance.along(path[i], path[j]) >= least - 0.5
     };
-    let mut out = vec![first];
-    let mut i = 0;
-    let last = path.len() - 1;
-    while i < last {
-        let mut good = i + 1;
-        let mut step = 2;
-        while i + step <= last && keeps(i, i + step) {
-            good = i + step;
-            step *= 2;
-        }
-        let mut bad = (i + step).min(last + 1);
-        while bad - good > 1 {
-            let mid = (good + bad) / 2;
-            if keeps(i, mid) {
-                good = mid;
-            } else {
-                bad = mid;
-            }
-        }
-        out.push(path[good]);
-        i = good;
-    }
-    out
+    crate::search::simplify_by(path, keeps)
 }
 
 #[cfg(test)]

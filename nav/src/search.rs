@@ -291,6 +291,13 @@ pub fn line_of_sight(grid: &Grid, a: CellXY, b: CellXY) -> bool {
 /// far cell still in line of sight (found by doubling then bisecting, so a long path costs
 /// O(L log L) checks rather than O(L²)). Keeps both ends; every segment is checked clear.
 pub fn simplify(grid: &Grid, path: &[CellXY]) -> Vec<CellXY> {
+    simplify_by(path, |i, j| line_of_sight(grid, path[i], path[j]))
+}
+
+/// Shortens a path to straight segments from waypoint `i` to waypoint `j` wherever
+/// `keeps(i, j)` allows (doubling then bisecting the jump from each waypoint, as [`simplify`]
+/// does). Keeps both ends.
+pub fn simplify_by(path: &[CellXY], keeps: impl Fn(usize, usize) -> bool) -> Vec<CellXY> {
     let Some(&first) = path.first() else {
         return vec![];
     };
@@ -301,7 +308,7 @@ pub fn simplify(grid: &Grid, path: &[CellXY]) -> Vec<CellXY> {
         // Doubling: the largest i + 2^k still in sight (i + 1 always is: path steps are adjacent).
         let mut good = i + 1;
         let mut step = 2;
-        while i + step <= last && line_of_sight(grid, path[i], path[i + step]) {
+        while i + step <= last && keeps(i, i + step) {
             good = i + step;
             step *= 2;
         }
@@ -309,7 +316,7 @@ pub fn simplify(grid: &Grid, path: &[CellXY]) -> Vec<CellXY> {
         let mut bad = (i + step).min(last + 1);
         while bad - good > 1 {
             let mid = (good + bad) / 2;
-            if line_of_sight(grid, path[i], path[mid]) {
+            if keeps(i, mid) {
                 good = mid;
             } else {
                 bad = mid;
