@@ -45,9 +45,9 @@ pub struct PlannerConfig {
     pub look_around_shift_m: f64,
     /// Paths keep this far from the inflated obstacles where they can (through the middle of
     /// a door rather than along its frame), metres: see [`crate::clearance`]. 0: shortest
-    /// paths. Off by default for now: on true poses 0.3 m cut collisions (seeds 0–3: 12 → 7),
-    /// but in the two SLAM missions measured with it coverage fell (90.9 → 45.8 %, 99.7 →
-    /// 84.8 %, one map's walls within 0.1 m at 74 %): too few runs to tell chance from cause.
+    /// paths. Off by default: on true poses 0.3 m cut collisions (seeds 0–3: 12 → 7), but on
+    /// SLAM poses missions mapped less with it (seeds 0, 1, 3, 4: 98.6, 90.9, 99.7, 99.6 % →
+    /// 98.0, 45.8, 84.8, 47.4 %), for reasons not yet known.
     pub comfort_m: f64,
 }
 
