@@ -46,8 +46,8 @@ pub struct PlannerConfig {
     /// Paths keep this far from the inflated obstacles where they can (through the middle of
     /// a door rather than along its frame), metres: see [`crate::clearance`]. 0: shortest
     /// paths. Off by default: on true poses 0.3 m cut collisions (seeds 0–3: 12 → 7), but on
-    /// SLAM poses missions mapped less with it (seeds 0, 1, 3, 4: 98.6, 90.9, 99.7, 99.6 % →
-    /// 98.0, 45.8, 84.8, 47.4 %), for reasons not yet known.
+    /// SLAM poses missions mapped less with it (seeds 0–5: mean coverage 96.5 → 76.3 %), for
+    /// reasons not yet known.
     pub comfort_m: f64,
 }
 
