@@ -2,7 +2,15 @@
 //!
 //! Inside the station sticks are unitless in [-1, 1]; pulse widths in µs exist only here, at the
 //! link boundary. Each vehicle has a [`ChannelMap`]: which RC channel carries each axis, whether
-//! the axis is reversed, and the pulse range.
+//! the axis is reversed, the pulse range, and the dead zone round mid stick (ArduPilot's
+//! `RCn_MIN`, `RCn_MAX`, `RCn_REVERSED`, `RCn_DZ`).
+//!
+//! A flight controller ignores pulses within its dead zone of mid stick and scales the rest from
+//! the zone's edge. A position controller's small corrections would be lost in it (with 20 µs of
+//! 400, an error under 0.17 m at a gain of 0.3 asks for nothing, and the drone holds wherever it
+//! drifted to), so [`ChannelMap::pulses`] sends any non-zero stick from just past the dead zone,
+//! and [`ChannelMap::sticks`], the flight controller's side, takes it back out: the two are
+//! inverse, and the stick the station commands is the stick the vehicle flies.
 
 /// The four stick axes, in the order the shield protocol sends them (roll, pitch, yaw, throttle).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -113,7 +121,7 @@ pub struct Channel {
     pub reversed: bool,
 }
 
-/// A vehicle's RC wiring: channel per axis, reversal and pulse range.
+/// A vehicle's RC wiring: channel per axis, reversal, pulse range and dead zone.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ChannelMap {
     /// Roll channel.
@@ -128,6 +136,8 @@ pub struct ChannelMap {
     pub min_us: u16,
     /// Pulse at +1 (or -1 when reversed), µs.
     pub max_us: u16,
+    /// Pulses within this of mid stick read as centred, on every axis, µs.
+    pub dead_zone_us: u16,
 }
 
 /// A channel map that cannot be used.
@@ -136,8 +146,8 @@ pub struct ChannelMap {
 pub struct ChannelMapError(pub String);
 
 impl ChannelMap {
-    /// ArduPilot Copter defaults (RCMAP 1-2-3-4, 1100–1900 µs). Pitch is reversed: ArduPilot reads
-    /// a low pitch pulse as stick forward (nose down).
+    /// ArduPilot Copter defaults (RCMAP 1-2-3-4, 1100–1900 µs, a dead zone of 20 µs). Pitch is
+    /// reversed: ArduPilot reads a low pitch pulse as stick forward (nose down).
     pub fn ardupilot() -> Self {
         Self {
             roll: Channel {
@@ -158,11 +168,13 @@ impl ChannelMap {
             },
             min_us: 1100,
             max_us: 1900,
+            dead_zone_us: 20,
         }
     }
 
     /// The thesis's I/O shield wired to a DJI Naza (1000–2000 µs): every axis reversed, so 2 ms
-    /// means roll left, pitch back, no thrust and yaw counter-clockwise.
+    /// means roll left, pitch back, no thrust and yaw counter-clockwise. DJI does not publish the
+    /// Naza's dead zone; 25 µs (5 % of the half range) is assumed.
     pub fn thesis_naza() -> Self {
         Self {
             roll: Channel {
@@ -183,10 +195,12 @@ impl ChannelMap {
             },
             min_us: 1000,
             max_us: 2000,
+            dead_zone_us: 25,
         }
     }
 
-    /// Checks channel numbers (1–18, distinct) and the pulse range (within 800–2200, min < max).
+    /// Checks channel numbers (1–18, distinct), the pulse range (within 800–2200, min < max) and
+    /// the dead zone (under a quarter of the half range).
     pub fn validate(&self) -> Result<(), ChannelMapError> {
         let numbers = Axis::ALL.map(|a| self.channel(a).number);
         if let Some(n) = numbers.iter().find(|n| !(1..=18).contains(*n)) {
@@ -208,6 +222,12 @@ impl ChannelMap {
                 self.min_us, self.max_us
             )));
         }
+        if u32::from(self.dead_zone_us) * 8 >= u32::from(self.max_us - self.min_us) {
+            return Err(ChannelMapError(format!(
+                "dead zone {} µs must be under a quarter of the half range {}–{} µs",
+                self.dead_zone_us, self.min_us, self.max_us
+            )));
+        }
         Ok(())
     }
 
@@ -226,7 +246,8 @@ impl ChannelMap {
         ((u32::from(self.min_us) + u32::from(self.max_us)) / 2) as u16
     }
 
-    /// Sticks → pulse widths, per axis. Always within `min_us..=max_us`.
+    /// Sticks → pulse widths, per axis: 0 is mid stick, any other stick lies past the dead zone
+    /// in proportion (±1 at the ends). Always within `min_us..=max_us`.
     pub fn pulses(&self, sticks: &Sticks) -> Pulses {
         let mut p = Pulses {
             roll: 0,
@@ -234,34 +255,50 @@ impl ChannelMap {
             yaw: 0,
             throttle: 0,
         };
-        let half = f32::from(self.max_us - self.min_us) / 2.0;
-        let mid = f32::from(self.min_us) + half;
+        let (mid, half, zone) = self.geometry();
+        let (lo, hi) = (
+            f32::from(self.min_us.min(self.max_us)),
+            f32::from(self.min_us.max(self.max_us)),
+        );
         for axis in Axis::ALL {
             let mut v = sticks.get(axis);
             if self.channel(axis).reversed {
                 v = -v;
             }
-            let us = (mid + v * half)
-                .round()
-                .clamp(f32::from(self.min_us), f32::from(self.max_us));
+            let offset = if v == 0.0 {
+                0.0
+            } else {
+                v.signum() * (zone + v.abs() * (half - zone))
+            };
+            let us = (mid + offset).round().clamp(lo, hi);
             p.set(axis, us as u16);
         }
         p
     }
 
-    /// Pulse widths → sticks (what a flight controller reads). Out-of-range pulses saturate.
+    /// Pulse widths → sticks, as a flight controller reads them: centred within the dead zone,
+    /// scaled from its edge beyond it. Out-of-range pulses saturate.
     pub fn sticks(&self, pulses: &Pulses) -> Sticks {
         let mut s = Sticks::CENTRED;
-        let half = f32::from(self.max_us - self.min_us) / 2.0;
-        let mid = f32::from(self.min_us) + half;
+        let (mid, half, zone) = self.geometry();
         for axis in Axis::ALL {
-            let mut v = ((f32::from(pulses.get(axis)) - mid) / half).clamp(-1.0, 1.0);
+            let offset = f32::from(pulses.get(axis)) - mid;
+            let mut v = (offset.signum() * ((offset.abs() - zone).max(0.0) / (half - zone)))
+                .clamp(-1.0, 1.0);
             if self.channel(axis).reversed {
                 v = -v;
             }
             s.set(axis, v);
         }
         s
+    }
+
+    /// Mid stick, the half range and the dead zone, µs (the zone kept under the half range, so
+    /// an unvalidated map divides by no zero).
+    fn geometry(&self) -> (f32, f32, f32) {
+        let half = f32::from(self.max_us.saturating_sub(self.min_us)).max(2.0) / 2.0;
+        let mid = f32::from(self.min_us) + half;
+        (mid, half, f32::from(self.dead_zone_us).min(half / 2.0))
     }
 
     /// Sticks → the 18 RC channels of a MAVLink override: the four mapped channels carry pulses,
@@ -320,7 +357,8 @@ mod tests {
             ..Sticks::CENTRED
         });
         assert_eq!(ch[1], 1100);
-        assert_eq!(ch[0], 1700);
+        // Half roll: half of the way from the dead zone's edge (1520 µs) to the end.
+        assert_eq!(ch[0], 1710);
         assert_eq!(ch[2], 1500);
         assert_eq!(ch[3], 1500);
         assert!(ch[4..].iter().all(|&c| c == u16::MAX));
@@ -337,7 +375,54 @@ mod tests {
         let mut m = ChannelMap::ardupilot();
         m.min_us = 1900;
         assert!(m.validate().is_err());
+        let mut m = ChannelMap::ardupilot();
+        m.dead_zone_us = 100;
+        assert!(m.validate().unwrap_err().0.contains("dead zone 100"));
+        // An unvalidated map still maps without a panic.
+        m.min_us = 1900;
+        m.max_us = 1100;
+        let _ = m.sticks(&m.pulses(&Sticks::CENTRED));
         assert!(ChannelMap::thesis_naza().validate().is_ok());
+    }
+
+    #[test]
+    fn small_sticks_go_past_the_dead_zone_and_come_back_unchanged() {
+        let m = ChannelMap::ardupilot();
+        let small = Sticks {
+            roll: 0.01,
+            pitch: 0.01,
+            yaw: -0.01,
+            throttle: 0.0,
+        };
+        let p = m.pulses(&small);
+        // 1500 ± (20 + 0.01 · 380) µs; pitch is reversed.
+        assert_eq!(
+            (p.roll, p.pitch, p.yaw, p.throttle),
+            (1524, 1476, 1476, 1500)
+        );
+        let back = m.sticks(&p);
+        for a in Axis::ALL {
+            assert!(
+                (back.get(a) - small.get(a)).abs() < 0.002,
+                "{a:?}: {back:?}"
+            );
+        }
+        // The flight controller's side: within the dead zone is centred, beyond it is scaled
+        // from its edge.
+        let read = |us: u16| {
+            m.sticks(&Pulses {
+                roll: us,
+                pitch: 1500,
+                yaw: 1500,
+                throttle: 1500,
+            })
+            .roll
+        };
+        assert_eq!(read(1519), 0.0);
+        assert_eq!(read(1481), 0.0);
+        assert!((read(1710) - 0.5).abs() < 1e-6);
+        assert_eq!(read(1900), 1.0);
+        assert_eq!(read(2100), 1.0, "out of range saturates");
     }
 
     #[test]

@@ -90,6 +90,8 @@ pub struct Plan {
     pub inflated: Grid,
     /// The frontiers, largest first.
     pub frontiers: Vec<Frontier>,
+    /// Goals of the frontiers left out because they lie near a blacklisted point, map frame.
+    pub ignored: Vec<[f64; 2]>,
     /// Robots × frontiers, metres, after the thesis's rules: unreachable → the largest finite cost
     /// plus 1 (strictly more than any reachable frontier, so a tie never sends a robot to a frontier
     /// it cannot reach while it could reach another), invalid pose → largest + 10.
@@ -173,20 +175,20 @@ pub fn plan(
         })
         .collect::<Result<Vec<Option<CellXY>>, _>>()?;
     let inflated = inflate(map, config.robot_radius_m);
-    let frontiers: Vec<Frontier> = frontiers(
+    let (frontiers, ignored): (Vec<Frontier>, Vec<Frontier>) = frontiers(
         &inflated,
         config.min_frontier_cells,
         config.max_frontier_span_m,
     )
     .into_iter()
-    .filter(|f| {
+    .partition(|f| {
         let g = inflated.center_of(f.goal);
         config
             .blacklist
             .iter()
             .all(|b| (b[0] - g[0]).hypot(b[1] - g[1]) > config.blacklist_radius_m)
-    })
-    .collect();
+    });
+    let ignored = ignored.iter().map(|f| inflated.center_of(f.goal)).collect();
     // A robot inside the inflated band around a wall starts from the nearest free cell.
     let reach = (config.robot_radius_m / map.resolution()).ceil() as usize * 2 + 2;
     let graph = Graph::new(&inflated);
@@ -291,6 +293,7 @@ pub fn plan(
     let reachable = raw.iter().flatten().any(Option::is_some);
     Ok(Plan {
         inflated,
+        ignored,
         complete: any_valid && !reachable,
         frontiers,
         costs,
@@ -649,6 +652,8 @@ mod tests {
         let p = plan(&map, &robots, &config).unwrap();
         assert_eq!(p.frontiers.len(), all.frontiers.len() - 1);
         assert!(p.frontiers.iter().all(|f| f.goal != all.frontiers[0].goal));
+        assert_eq!(p.ignored, vec![first], "the plan says what it left out");
+        assert!(all.ignored.is_empty());
     }
 
     #[test]

@@ -38,8 +38,6 @@ pub struct VehicleParams {
     pub climb_tau: f64,
     /// Linear drag, 1/s (acceleration per m/s of airspeed).
     pub drag: f64,
-    /// Stick dead band around centre.
-    pub deadband: f64,
     /// Horizontal speed at full stick in LOITER, m/s.
     pub loiter_speed: f64,
     /// Descent rate in LAND, m/s.
@@ -65,7 +63,6 @@ impl Default for VehicleParams {
             max_climb: 1.0,
             climb_tau: 0.3,
             drag: 0.6,
-            deadband: 0.05,
             loiter_speed: 1.5,
             land_speed: 0.5,
             battery_full_v: 12.6,
@@ -262,27 +259,17 @@ impl Vehicle {
         }
     }
 
-    fn stick(&self, v: f32) -> f64 {
-        let v = f64::from(v);
-        let d = self.params.deadband;
-        if v.abs() <= d {
-            0.0
-        } else {
-            (v - d * v.signum()) / (1.0 - d)
-        }
-    }
-
     /// What the flight controller asks for: lean (roll, pitch), yaw rate and the vertical command.
     fn targets(&mut self) -> (f64, f64, f64, Vertical) {
         let p = &self.params;
         let s = &self.state;
         let sticks = self.sticks;
         let (roll_in, pitch_in) = (
-            self.stick(sticks.get(link::Axis::Roll)),
-            self.stick(sticks.get(link::Axis::Pitch)),
+            f64::from(sticks.get(link::Axis::Roll)),
+            f64::from(sticks.get(link::Axis::Pitch)),
         );
-        let yaw_rate = -self.stick(sticks.get(link::Axis::Yaw)) * p.max_yaw_rate; // + stick = clockwise
-        let throttle = self.stick(sticks.get(link::Axis::Throttle));
+        let yaw_rate = -f64::from(sticks.get(link::Axis::Yaw)) * p.max_yaw_rate; // + stick = clockwise
+        let throttle = f64::from(sticks.get(link::Axis::Throttle));
         let climb = Vertical::Rate(throttle * p.max_climb);
         match self.mode {
             FlightMode::Stabilize => (

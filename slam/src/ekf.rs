@@ -48,8 +48,6 @@ pub struct EkfConfig {
     pub climb_tau: f64,
     /// Linear drag, 1/s.
     pub drag: f64,
-    /// Stick dead band around centre.
-    pub deadband: f64,
     /// Process noise: horizontal and vertical acceleration (gusts, model error), m/s² per √s.
     pub accel_noise: (f64, f64),
     /// Process noise of the attitude and yaw rate, rad/s per √s.
@@ -89,7 +87,6 @@ impl Default for EkfConfig {
             max_climb: 1.0,
             climb_tau: 0.3,
             drag: 0.6,
-            deadband: 0.05,
             accel_noise: (0.5, 0.3),
             attitude_noise: 0.2,
             slam_position_sigma: 0.03,
@@ -353,14 +350,10 @@ impl Ekf {
         self.record(Op::Input(input));
     }
 
+    /// A stick as the vehicle flies it (the link sends it past the flight controller's dead
+    /// zone: `link::rc`).
     fn stick(&self, v: f64) -> f64 {
-        let d = self.config.deadband;
-        let v = v.clamp(-1.0, 1.0);
-        if v.abs() <= d {
-            0.0
-        } else {
-            (v - d * v.signum()) / (1.0 - d)
-        }
+        v.clamp(-1.0, 1.0)
     }
 
     /// The state's time derivative under the current input.
@@ -660,8 +653,9 @@ mod tests {
             ..Input::default()
         };
         let x = truth_run(&config, input, 15.0);
-        // Lean (0.5 − 0.05)/0.95 of 20°, speed g·tan(lean)/drag along the heading 0.3 rad.
-        let lean = (0.45 / 0.95) * 20f64.to_radians();
+        // Lean half of 20° (the link sends the stick past the autopilot's dead zone), speed
+        // g·tan(lean)/drag along the heading 0.3 rad.
+        let lean = 0.5 * 20f64.to_radians();
         let speed = G * lean.tan() / config.drag;
         assert!((x[PITCH] - lean).abs() < 1e-6);
         assert!((x[VX].hypot(x[VX + 1]) - speed).abs() < 0.01, "{}", x[VX]);

@@ -90,12 +90,13 @@ fn check_report(r: &Value) {
     // 20 Hz for 1.5 s.
     assert!((24..=36).contains(&o.len()), "{} overrides", o.len());
     for row in &o {
-        // ArduPilot map: roll 0.5 → 1700, pitch forward 1.0 → 1100 (reversed), throttle 0.2 → 1580,
-        // yaw -0.25 → 1400; channels 5–8 and 9/18 untouched (u16::MAX).
+        // ArduPilot map, from the dead zone's edge (1500 ± 20 µs): roll 0.5 → 1710, pitch forward
+        // 1.0 → 1100 (reversed), throttle 0.2 → 1596, yaw -0.25 → 1385; channels 5–8 and 9/18
+        // untouched (u16::MAX).
         assert_eq!(
             &row[1..],
             &[
-                1700.0, 1100.0, 1580.0, 1400.0, 65535.0, 65535.0, 65535.0, 65535.0, 65535.0,
+                1710.0, 1100.0, 1596.0, 1385.0, 65535.0, 65535.0, 65535.0, 65535.0, 65535.0,
                 65535.0
             ]
         );
@@ -245,7 +246,7 @@ fn two_vehicles_on_one_udp_port_are_told_apart_by_system_id() {
     std::thread::sleep(Duration::from_millis(300));
     a.command(Command::Disarm).expect("disarm 1");
     b.command(Command::Disarm).expect("disarm 2");
-    for (report, roll) in [(one.report(10 * S), 1700.0), (two.report(10 * S), 1300.0)] {
+    for (report, roll) in [(one.report(10 * S), 1710.0), (two.report(10 * S), 1290.0)] {
         let o = overrides(&report);
         assert!(o.len() >= 15, "{} overrides", o.len());
         assert!(

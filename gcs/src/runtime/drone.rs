@@ -90,6 +90,9 @@ pub struct DroneConfig {
     pub follower: FollowerConfig,
     /// Pose filter.
     pub ekf: EkfConfig,
+    /// Holding still (a look around, a turn, a hover), an error under this is left to the
+    /// autopilot's own position hold instead of chasing the pose estimate's noise, metres.
+    pub hold_band_m: f64,
     /// Seconds without 0.3 m of progress toward a goal before it is given up.
     pub stuck_s: f64,
     /// A look around on the spot takes this long, seconds.
@@ -143,6 +146,7 @@ impl Default for DroneConfig {
                 ..FollowerConfig::default()
             },
             ekf: EkfConfig::default(),
+            hold_band_m: 0.1,
             stuck_s: 15.0,
             scan_s: 10.0,
             blind_yaw: 0.2,
@@ -189,6 +193,8 @@ pub struct Drone {
     progress: (f64, [f64; 2]),
     scan: Option<Scan>,
     hold: [f64; 2],
+    /// Pursuing a carrot along a path this tick (not holding still).
+    tracking: bool,
     /// Heading held, radians.
     pub yaw_goal: f64,
     /// Height held, metres.
@@ -246,6 +252,7 @@ impl Drone {
             progress: (t, [x, y]),
             scan: None,
             hold: [x, y],
+            tracking: false,
             yaw_goal: yaw,
             height_goal: spec.altitude,
             pending: None,
@@ -568,6 +575,7 @@ impl Drone {
             return self.fly_blind(now, config, telemetry.height_m);
         };
         self.blind_since = None;
+        self.tracking = false;
         let here = [pose[0], pose[1]];
         let mut event = None;
         match self.phase {
@@ -608,7 +616,12 @@ impl Drone {
             z: pose[2],
             yaw: pose[3],
         };
-        let c = self.controller.update(&setpoint, &estimate, dt);
+        let mut c = self.controller.update(&setpoint, &estimate, dt);
+        if !self.tracking
+            && (setpoint.x - estimate.x).hypot(setpoint.y - estimate.y) < config.hold_band_m
+        {
+            (c.roll, c.pitch) = (0.0, 0.0);
+        }
         self.set_sticks(Sticks {
             roll: c.roll as f32,
             pitch: c.pitch as f32,
@@ -663,6 +676,7 @@ impl Drone {
                 self.yaw_goal = yaw;
             }
             Follow::Track { carrot, yaw } => {
+                self.tracking = true;
                 self.hold = carrot;
                 self.yaw_goal = yaw;
             }
@@ -850,6 +864,30 @@ mod tests {
                 .take_messages()
                 .iter()
                 .any(|m| m.contains("no camera frame for 5 s")),
+        );
+    }
+
+    #[test]
+    fn holding_still_a_small_error_is_left_to_the_autopilot_a_larger_one_is_flown_back() {
+        let config = DroneConfig::default();
+        let mut drone = exploring_drone(Arc::default(), &config);
+        // Looking around at the start (0, 0), facing +x.
+        drone.scan = Some(Scan {
+            since: 0.0,
+            yaw0: 0.0,
+            give_up: None,
+        });
+        drone.hold = [0.6 * config.hold_band_m, 0.0];
+        drone.tick(0.1, &config);
+        let s = drone.sticks.expect("sticks");
+        assert_eq!((s.roll, s.pitch), (0.0, 0.0), "{s:?}");
+        drone.hold = [3.0 * config.hold_band_m, 0.0];
+        drone.tick(0.2, &config);
+        let s = drone.sticks.expect("sticks");
+        // Mostly forward (the heading has moved a little with the look around).
+        assert!(
+            s.pitch > 0.0 && s.roll.abs() < 0.05 * s.pitch,
+            "forward, to +x: {s:?}"
         );
     }
 

@@ -22,6 +22,7 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use link::{LinkStatus, Sticks, Telemetry};
+use nav::blacklist::Blacklist;
 use nav::grid::Grid;
 use nav::mission::{PlannerConfig, Strategy};
 use slam::system::{RobotState, Slam};
@@ -301,7 +302,7 @@ impl Runtime {
             snapshot: snapshot.clone(),
             state: MissionState::Waiting,
             started: None,
-            blacklist: vec![],
+            blacklist: Blacklist::new(PlannerConfig::default().blacklist_radius_m),
             grid: None,
             frontiers: vec![],
             messages: vec![],
@@ -392,8 +393,8 @@ struct Mission {
     snapshot: Arc<Mutex<Arc<Snapshot>>>,
     state: MissionState,
     started: Option<f64>,
-    /// Goals given up for good.
-    blacklist: Vec<[f64; 2]>,
+    /// Goals given up (each gets a second look before the mission completes).
+    blacklist: Blacklist,
     grid: Option<Arc<Grid>>,
     frontiers: Vec<[f64; 2]>,
     messages: Vec<(f64, String)>,
@@ -642,7 +643,7 @@ impl Mission {
                     ?goal,
                     "frontier goal closed: reached or unreachable"
                 );
-                self.blacklist.push(goal);
+                self.blacklist.give_up(goal);
             }
             let messages = self.drones[k].take_messages();
             let name = self.drones[k].name.clone();
@@ -743,7 +744,7 @@ impl Mission {
             .map(|&robot_radius_m| PlannerConfig {
                 strategy: self.config.strategy,
                 robot_radius_m,
-                blacklist: self.blacklist.clone(),
+                blacklist: self.blacklist.ignored(),
                 ..PlannerConfig::default()
             })
             .collect();
@@ -779,7 +780,7 @@ impl Mission {
                     })
                     .collect(),
                 frontiers: self.frontiers.clone(),
-                given_up: self.blacklist.clone(),
+                given_up: self.blacklist.ignored(),
             });
             r.send(Record::Grid {
                 t: now,
@@ -793,6 +794,15 @@ impl Mission {
         let all_valid = robots.iter().all(Option::is_some);
         let airborne = self.drones.iter().all(|d| d.phase != Phase::TakingOff);
         if plan.complete && all_valid && airborne && elapsed > self.config.min_mission_s {
+            // Goals given up once may have failed by chance: one more look before the end.
+            let released = self.blacklist.second_look(&plan.ignored);
+            if released > 0 {
+                self.say(
+                    now,
+                    format!("no other frontier left: a second look at {released} given up once"),
+                );
+                return;
+            }
             self.say(
                 now,
                 format!(
