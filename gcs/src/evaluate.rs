@@ -4,30 +4,58 @@
 use image::{GrayImage, Luma};
 use imageproc::distance_transform::euclidean_squared_distance_transform;
 use nav::grid::{Cell, Grid};
+#[cfg(test)]
+use sitl::VehicleParams;
 use sitl::World;
 
-/// The world's free cells reachable from the drones' starts (4-connected), world cells.
-pub fn reachable_free(world: &World) -> Vec<(i64, i64)> {
+/// The world's free cells a drone of `radius_m` can sweep from the drones' starts, world cells:
+/// the positions its centre can reach without touching a wall (8-connected from each start),
+/// and every free cell whose centre lies within the radius plus half a cell's diagonal of one
+/// of them (its body overlaps the cell). A room behind a gap narrower than the drone is not
+/// counted; the cells along its walls are. (Positions are cell centres, so on a grid as coarse
+/// as the radius a cell deep in a corner may be missed.)
+pub fn reachable_free(world: &World, radius_m: f64) -> Vec<(i64, i64)> {
     let (w, h) = world.size();
-    let mut seen = vec![false; w * h];
+    let res = world.resolution();
+    let index = |x: i64, y: i64| y as usize * w + x as usize;
+    // Centre to the nearest wall face, metres.
+    let room = |x: i64, y: i64| (f64::from(world.clearance(x, y)) - 0.5) * res;
+    let mut centre = vec![false; w * h];
     let mut queue = std::collections::VecDeque::new();
     for s in world.starts() {
         let (x, y) = world.cell_of(*s);
-        if !world.material(x, y).is_solid() {
-            seen[y as usize * w + x as usize] = true;
+        if !world.material(x, y).is_solid() && !centre[index(x, y)] {
+            centre[index(x, y)] = true;
             queue.push_back((x, y));
         }
     }
-    let mut out = vec![];
     while let Some((x, y)) = queue.pop_front() {
-        out.push((x, y));
-        for (nx, ny) in [(x + 1, y), (x - 1, y), (x, y + 1), (x, y - 1)] {
-            if !world.material(nx, ny).is_solid() {
-                let i = ny as usize * w + nx as usize;
-                if !seen[i] {
-                    seen[i] = true;
+        for dy in -1..=1 {
+            for dx in -1..=1 {
+                let (nx, ny) = (x + dx, y + dy);
+                if world.material(nx, ny).is_solid() || room(nx, ny) < radius_m - 1e-9 {
+                    continue;
+                }
+                let i = index(nx, ny);
+                if !centre[i] {
+                    centre[i] = true;
                     queue.push_back((nx, ny));
                 }
+            }
+        }
+    }
+    // Distance of every cell to the nearest reachable centre.
+    let centres = GrayImage::from_fn(w as u32, h as u32, |x, y| {
+        Luma([u8::from(centre[y as usize * w + x as usize])])
+    });
+    let d2 = euclidean_squared_distance_transform(&centres);
+    let reach = radius_m / res + std::f64::consts::FRAC_1_SQRT_2;
+    let mut out = vec![];
+    for y in 0..h as i64 {
+        for x in 0..w as i64 {
+            let Luma([d2]) = *d2.get_pixel(x as u32, y as u32);
+            if !world.material(x, y).is_solid() && d2.sqrt() <= reach + 1e-9 {
+                out.push((x, y));
             }
         }
     }
@@ -105,10 +133,67 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_room_behind_a_gap_narrower_than_the_drone_is_not_reachable() {
+        // 0.1 m cells, rooms 0.8 m wide; the left room's start; a door of 0.6 m into the middle
+        // room, a slit of 0.3 m (narrower than a drone of 0.4 m) into the right one.
+        let text = "resolution 0.1\n---\n\
+                    ############################\n\
+                    #........#........#........#\n\
+                    #........#........#........#\n\
+                    #.................#........#\n\
+                    #..1..............#........#\n\
+                    #.................#........#\n\
+                    #.................#........#\n\
+                    #..........................#\n\
+                    #..........................#\n\
+                    #........#.................#\n\
+                    #........#........#........#\n\
+                    ############################\n";
+        let world = World::parse_text("rooms", text).expect("a world");
+        let columns = |cells: &[(i64, i64)]| {
+            let mut xs: Vec<i64> = cells.iter().map(|c| c.0).collect();
+            xs.sort_unstable();
+            xs.dedup();
+            xs
+        };
+        // A drone of 0.1 m fits through both; one of 0.2 m only through the door.
+        let small = reachable_free(&world, 0.1);
+        assert!(columns(&small).contains(&25), "{:?}", columns(&small));
+        let drone = reachable_free(&world, 0.2);
+        // Both rooms it reaches, and no further than the slit's own cells (column 18).
+        let reached = columns(&drone);
+        assert!((1..=17).all(|x| reached.contains(&x)), "{reached:?}");
+        assert!(reached.iter().all(|&x| x <= 18), "{reached:?}");
+        // The cells along the walls of those rooms count (its body covers them), all but a few
+        // deep in the corners.
+        let h = world.size().1 as i64;
+        for along_a_wall in [
+            (1, 5),
+            (4, 1),
+            (4, h - 2),
+            (8, 2),
+            (10, 2),
+            (13, h - 2),
+            (17, 4),
+        ] {
+            assert!(drone.contains(&along_a_wall), "{along_a_wall:?}");
+        }
+        let free = (0..h)
+            .flat_map(|y| (1..=17).map(move |x| (x, y)))
+            .filter(|&(x, y)| !world.material(x, y).is_solid())
+            .count();
+        let counted = drone.iter().filter(|c| c.0 <= 17).count();
+        assert!(
+            counted <= free && counted + 8 >= free,
+            "{counted} of {free}"
+        );
+    }
+
+    #[test]
     fn the_world_as_its_own_map_is_fully_covered_and_exact() {
         let world = World::load("apartment").expect("built-in");
         let truth = world.to_grid();
-        let reachable = reachable_free(&world);
+        let reachable = reachable_free(&world, VehicleParams::default().radius);
         assert!(reachable.len() > 2000);
         assert!((coverage(&reachable, &world, &truth) - 1.0).abs() < 1e-9);
         let e = wall_error(&world, &truth).expect("walls");

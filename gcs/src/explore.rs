@@ -441,7 +441,7 @@ fn watch(
     clock: Arc<dyn gcs::clock::Clock>,
     faults: &[Fault],
 ) -> anyhow::Result<()> {
-    let reachable = reachable_free(world);
+    let reachable = reachable_free(world, sitl::VehicleParams::default().radius);
     let wall = Instant::now();
     let t0 = clock.now();
     let mut truth_tracks: Vec<Vec<(f64, [f64; 4])>> = vec![vec![]; args.sim.drones];

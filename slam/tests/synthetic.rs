@@ -211,7 +211,16 @@ fn pilot(s: &sitl::VehicleState, goal: Waypoint) -> (Sticks, bool) {
     );
     let yaw_err = (goal[3] - s.yaw + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
         - std::f64::consts::PI;
-    let clamp = |v: f64, l: f64| v.clamp(-l, l) as f32;
+    // An uncompensated pilot, as these flights were made: the autopilot ignores a stick within
+    // 5 % of centre (its dead zone) and holds its position there.
+    let clamp = |v: f64, l: f64| {
+        let v = f64::from(v.clamp(-l, l) as f32);
+        (if v.abs() <= 0.05 {
+            0.0
+        } else {
+            (v - 0.05 * v.signum()) / 0.95
+        }) as f32
+    };
     let sticks = Sticks {
         pitch: clamp(0.5 * fwd - 0.6 * vf, 0.35),
         roll: clamp(-(0.5 * left - 0.6 * vl), 0.35),

@@ -175,7 +175,7 @@ impl GcsApp {
             reachable: station
                 .world
                 .as_deref()
-                .map(crate::evaluate::reachable_free),
+                .map(|w| crate::evaluate::reachable_free(w, sitl::VehicleParams::default().radius)),
             ..Coverage::default()
         };
         Self {
