@@ -244,6 +244,10 @@ const POLL: Duration = Duration::from_millis(5);
 /// A pose is carried forward at most this long: past it the vehicle is taken to stand still.
 const MAX_EXTRAPOLATION: Duration = Duration::from_millis(250);
 
+/// Reports closer together than this are parts of one (position and attitude come in separate
+/// messages, often a millisecond apart): the motion is measured over a longer span.
+const MIN_SPAN: Duration = Duration::from_millis(10);
+
 /// The last two poses an autopilot reported, with when each arrived. Autopilots stream pose at
 /// whatever rate the ground station asked for (ArduPilot behind MAVProxy: 4 Hz by default), so
 /// a frame rendered at the last reported pose would show the past; the camera renders at the
@@ -255,12 +259,17 @@ pub struct PoseTrack {
 }
 
 impl PoseTrack {
-    /// Records the pose reported now, if it is a new one.
+    /// Records the pose reported now, if it is a new one. A report within [`MIN_SPAN`] of the
+    /// last completes it (a new attitude after a new position) instead of following it: carried
+    /// forward over a millisecond's span, half an update would read as a leap.
     pub fn observe(&mut self, at: Instant, map_from_body: Isometry3<f64>) {
-        if self.last.is_some_and(|(_, p)| p == map_from_body) {
-            return;
+        match self.last {
+            Some((_, p)) if p == map_from_body => {}
+            Some((t, _)) if at.saturating_duration_since(t) < MIN_SPAN => {
+                self.last = Some((at, map_from_body));
+            }
+            _ => self.previous = self.last.replace((at, map_from_body)),
         }
-        self.previous = self.last.replace((at, map_from_body));
     }
 
     /// The pose at `now`: the last report carried forward at the motion between the last two
@@ -427,5 +436,23 @@ mod tests {
         // A vehicle whose reports stopped is not carried off for ever.
         let far = track.at(t1 + Duration::from_secs(5)).unwrap();
         assert!((far.rotation.euler_angles().2 - 0.35).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_position_and_an_attitude_a_millisecond_apart_are_one_report() {
+        // The same motion reported at 50 Hz, position first and the attitude 1 ms later.
+        let t0 = Instant::now();
+        let ms = |m: u64| t0 + Duration::from_millis(m);
+        let mut track = PoseTrack::default();
+        let pose = |x: f64, yaw: f64| Isometry3::new(Vector3::new(x, 0.0, 1.0), Vector3::z() * yaw);
+        track.observe(ms(0), pose(0.0, 0.0));
+        track.observe(ms(20), pose(0.02, 0.0));
+        track.observe(ms(21), pose(0.02, 0.02));
+        // 10 ms on, the vehicle has moved 0.01 m and turned 0.01 rad more, not 0.1 m (the
+        // position step carried over the attitude's 1 ms span) or 0.2 rad.
+        let p = track.at(ms(31)).expect("a pose");
+        let yaw = p.rotation.euler_angles().2;
+        assert!((yaw - 0.03).abs() < 0.003, "{yaw}");
+        assert!((p.translation.x - 0.03).abs() < 0.003, "{}", p.translation);
     }
 }
