@@ -14,7 +14,8 @@ pub struct Frontier {
     pub cells: usize,
     /// Centroid of its cells, map frame, metres.
     pub centroid: [f64; 2],
-    /// Where a robot is sent: the free cell nearest to the centroid.
+    /// Where a robot is sent: the free cell nearest to the centroid (the mission planner moves it
+    /// to a [`crate::vantage::viewpoint`] when no robot can reach it).
     pub goal: CellXY,
 }
 

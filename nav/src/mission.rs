@@ -7,7 +7,7 @@ use crate::frontier::{Frontier, frontiers};
 use crate::grid::{Cell, CellXY, Grid};
 use crate::inflate::inflate;
 use crate::search::{Graph, UNREACHABLE, dijkstra, metres, nearest_free};
-use crate::vantage::vantage;
+use crate::vantage::{vantage, viewpoint};
 
 /// How robots are matched to frontiers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -49,6 +49,11 @@ pub struct PlannerConfig {
     /// SLAM poses missions mapped less with it (seeds 0–5: mean coverage 96.5 → 76.3 %), for
     /// reasons not yet known.
     pub comfort_m: f64,
+    /// A frontier whose goal no robot can reach is given, as its goal, the reachable cell
+    /// nearest to it within this range that sees it ([`crate::vantage::viewpoint`]), metres
+    /// (within the camera's range: the occupancy map takes depth up to 4 m). 0: such a frontier
+    /// stays out of reach.
+    pub view_range_m: f64,
 }
 
 impl Default for PlannerConfig {
@@ -63,6 +68,7 @@ impl Default for PlannerConfig {
             look_around_room_m: 0.7,
             look_around_shift_m: 1.5,
             comfort_m: 0.0,
+            view_range_m: 2.5,
         }
     }
 }
@@ -130,15 +136,23 @@ pub enum PlanError {
 /// One planner step with a fallback: plans with each configuration in turn (a mission lists
 /// them widest robot radius first) and keeps the first plan that leaves a frontier to explore,
 /// else the last one — a map whose last frontiers lie behind a narrow door is explored with a
-/// thinner margin rather than declared complete. `None` only when `configs` is empty.
+/// thinner margin rather than declared complete. Only the last configuration looks at
+/// frontiers from afar ([`PlannerConfig::view_range_m`]): a wider one would peek through every
+/// door it cannot pass instead of handing over to a thinner one that flies through. `None`
+/// only when `configs` is empty.
 pub fn plan_first_open(
     map: &Grid,
     robots: &[Option<[f64; 2]>],
     configs: &[PlannerConfig],
 ) -> Result<Option<Plan>, PlanError> {
     let mut chosen = None;
-    for config in configs {
-        let plan = plan(map, robots, config)?;
+    for (k, config) in configs.iter().enumerate() {
+        let last = k + 1 == configs.len();
+        let config = PlannerConfig {
+            view_range_m: if last { config.view_range_m } else { 0.0 },
+            ..config.clone()
+        };
+        let plan = plan(map, robots, &config)?;
         let open = !plan.complete;
         chosen = Some(plan);
         if open {
@@ -175,20 +189,6 @@ pub fn plan(
         })
         .collect::<Result<Vec<Option<CellXY>>, _>>()?;
     let inflated = inflate(map, config.robot_radius_m);
-    let (frontiers, ignored): (Vec<Frontier>, Vec<Frontier>) = frontiers(
-        &inflated,
-        config.min_frontier_cells,
-        config.max_frontier_span_m,
-    )
-    .into_iter()
-    .partition(|f| {
-        let g = inflated.center_of(f.goal);
-        config
-            .blacklist
-            .iter()
-            .all(|b| (b[0] - g[0]).hypot(b[1] - g[1]) > config.blacklist_radius_m)
-    });
-    let ignored = ignored.iter().map(|f| inflated.center_of(f.goal)).collect();
     // A robot inside the inflated band around a wall starts from the nearest free cell.
     let reach = (config.robot_radius_m / map.resolution()).ceil() as usize * 2 + 2;
     let graph = Graph::new(&inflated);
@@ -196,6 +196,30 @@ pub fn plan(
         .iter()
         .map(|s| s.and_then(|c| nearest_free(&inflated, c, reach)))
         .collect();
+    let mut all = frontiers(
+        &inflated,
+        config.min_frontier_cells,
+        config.max_frontier_span_m,
+    );
+    if config.view_range_m > 0.0 {
+        // A goal no robot can reach is looked at from where one can (a doorway seen at a slant).
+        let reachable = graph.reachable(&origins.iter().flatten().copied().collect::<Vec<_>>());
+        for f in &mut all {
+            if !reachable[f.goal.1 * inflated.width() + f.goal.0]
+                && let Some(v) = viewpoint(map, &reachable, f.goal, config.view_range_m)
+            {
+                f.goal = v;
+            }
+        }
+    }
+    let (frontiers, ignored): (Vec<Frontier>, Vec<Frontier>) = all.into_iter().partition(|f| {
+        let g = inflated.center_of(f.goal);
+        config
+            .blacklist
+            .iter()
+            .all(|b| (b[0] - g[0]).hypot(b[1] - g[1]) > config.blacklist_radius_m)
+    });
+    let ignored = ignored.iter().map(|f| inflated.center_of(f.goal)).collect();
     let goals: Vec<CellXY> = frontiers.iter().map(|f| f.goal).collect();
     let reached = search_all(&graph, &origins, &goals);
     // Robots × frontiers, metres; `None` where unreachable (a whole row for a robot without a
@@ -503,6 +527,60 @@ mod tests {
         let [gx, gy] = r.goal.unwrap();
         let [ex, ey] = *r.path.last().unwrap();
         assert!((gx - ex).hypot(gy - ey) <= cfg.look_around_shift_m + 1e-9);
+    }
+
+    #[test]
+    fn a_room_seen_through_a_door_too_narrow_to_fly_is_looked_into_from_the_door() {
+        let g = crate::vantage::tests::doorway_seen_at_a_slant();
+        let robot = [Some([1.65, 0.55])];
+        let cfg = PlannerConfig {
+            look_around_room_m: 0.0,
+            ..toy_config()
+        };
+        // Without viewpoints the strip's frontier is out of reach: "complete".
+        let blind = plan(
+            &g,
+            &robot,
+            &PlannerConfig {
+                view_range_m: 0.0,
+                ..cfg.clone()
+            },
+        )
+        .unwrap();
+        assert!(blind.complete && !blind.frontiers.is_empty());
+        // With them the robot flies to the door's side and looks in.
+        let p = plan(&g, &robot, &cfg).unwrap();
+        assert!(!p.complete);
+        let r = &p.robots[0];
+        let goal = r.goal.expect("a goal");
+        assert!(goal[0] > 0.85, "{goal:?} is in the east room");
+        assert_eq!(r.path.last(), Some(&goal));
+        let f = &p.frontiers[r.frontier.unwrap()];
+        assert!(f.centroid[0] < 0.8, "{:?}", f.centroid);
+        assert!(crate::search::line_of_sight(&g, f.goal, g.cell_of(f.centroid).unwrap()));
+    }
+
+    #[test]
+    fn a_door_a_thinner_margin_passes_is_flown_through_not_looked_through() {
+        let g = crate::vantage::tests::doorway_seen_at_a_slant();
+        let robot = [Some([1.65, 0.55])];
+        let radius = |r: f64| PlannerConfig {
+            robot_radius_m: r,
+            look_around_room_m: 0.0,
+            ..toy_config()
+        };
+        // 0.2 m shuts the 0.4 m door, 0.1 m does not: the robot goes in.
+        let p = plan_first_open(&g, &robot, &[radius(0.2), radius(0.1)])
+            .unwrap()
+            .expect("a plan");
+        let goal = p.robots[0].goal.expect("a goal");
+        assert!(goal[0] < 0.8, "{goal:?} is in the west room");
+        // Only a margin that shuts it looks through it.
+        let p = plan_first_open(&g, &robot, &[radius(0.3), radius(0.2)])
+            .unwrap()
+            .expect("a plan");
+        let goal = p.robots[0].goal.expect("a goal");
+        assert!(goal[0] > 0.85, "{goal:?} is in the east room");
     }
 
     #[test]

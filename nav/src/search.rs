@@ -115,6 +115,32 @@ impl Graph {
         }
         field
     }
+
+    /// Which cells a search from any of `starts` reaches (each start included, whatever it is),
+    /// indexed like the grid's cells (`y * width + x`). One flood fill for all starts: a
+    /// diagonal step needs both cells beside it free, so 4-neighbour steps reach the same cells.
+    pub fn reachable(&self, starts: &[CellXY]) -> Vec<bool> {
+        let mut seen = vec![false; self.free.len()];
+        let mut stack: Vec<usize> = starts
+            .iter()
+            .filter(|(x, y)| *x < self.width && *y < self.height)
+            .map(|(x, y)| (y + 1) * self.stride + x + 1)
+            .collect();
+        for &s in &stack {
+            seen[s] = true;
+        }
+        while let Some(u) = stack.pop() {
+            for v in [u + 1, u - 1, u + self.stride, u - self.stride] {
+                if self.free[v] && !seen[v] {
+                    seen[v] = true;
+                    stack.push(v);
+                }
+            }
+        }
+        (0..self.width * self.height)
+            .map(|i| seen[(i / self.width + 1) * self.stride + i % self.width + 1])
+            .collect()
+    }
 }
 
 /// The moves from a cell that stay on free cells and do not cut a corner: `(neighbour, cost)`.
@@ -333,6 +359,29 @@ mod tests {
     use super::*;
     use crate::grid::tests::grid;
     use proptest::prelude::*;
+
+    #[test]
+    fn the_flood_fill_reaches_what_the_searches_reach() {
+        // Two pockets joined only corner to corner (no corner cutting), and a start on a wall.
+        let g = grid(&[
+            "#########",
+            "#...#...#",
+            "#...#...#",
+            "####.####",
+            "#..#.#..#",
+            "#..#....#",
+            "#########",
+        ]);
+        let graph = Graph::new(&g);
+        for starts in [vec![(1, 1)], vec![(5, 5), (1, 1)], vec![(0, 0)], vec![(4, 3)]] {
+            let reach = graph.reachable(&starts);
+            for (i, &r) in reach.iter().enumerate() {
+                let c = g.xy(i);
+                let searched = starts.iter().any(|&s| graph.dijkstra(s).cost(c) != UNREACHABLE);
+                assert_eq!(r, searched, "{starts:?} → {c:?}");
+            }
+        }
+    }
 
     #[test]
     fn no_corner_cutting_and_diagonals_cost_root_two() {

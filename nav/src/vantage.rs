@@ -7,6 +7,11 @@
 //! 0.3–0.6 m away, most during the turn at a goal). A robot can look around instead from the free
 //! cell nearest its goal, in sight of it, with room on every side
 //! ([`crate::PlannerConfig::look_around_room_m`], 0.7 m by default).
+//!
+//! A frontier can also lie where no robot can go, yet be seen from where one can: a doorway
+//! seen at a slant shows a thin strip of the room behind it, too thin to fly into, and the
+//! strip's edge is the frontier (HouseExpo's room 0000: a 0.74 m door left 44 % of the house
+//! "out of reach"). Its [`viewpoint`] is the reachable cell nearest to it in sight of it.
 
 use image::{GrayImage, Luma};
 use imageproc::distance_transform::euclidean_squared_distance_transform;
@@ -83,6 +88,33 @@ pub fn vantage(
         .filter(|&&(_, room, c)| room > own && in_sight(c))
         .max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)))
         .map_or(goal, |&(_, _, c)| c)
+}
+
+/// Where to look at an unreachable `goal` from: the cell nearest to it (within `range_m`) that
+/// `reachable` marks (indexed like `map`'s cells) and from whose centre the straight line to the
+/// goal crosses only cells `map` knows as free. `None` if there is none.
+pub fn viewpoint(map: &Grid, reachable: &[bool], goal: CellXY, range_m: f64) -> Option<CellXY> {
+    let r = (range_m.max(0.0) / map.resolution()).floor() as isize;
+    let (gx, gy) = (goal.0 as isize, goal.1 as isize);
+    let mut candidates: Vec<(isize, CellXY)> = vec![];
+    for dy in -r..=r {
+        for dx in -r..=r {
+            let (x, y) = (gx + dx, gy + dy);
+            let d2 = dx * dx + dy * dy;
+            if d2 > r * r || x < 0 || y < 0 || x as usize >= map.width() {
+                continue;
+            }
+            let c = (x as usize, y as usize);
+            if reachable.get(y as usize * map.width() + x as usize) == Some(&true) {
+                candidates.push((d2, c));
+            }
+        }
+    }
+    candidates.sort_unstable();
+    candidates
+        .into_iter()
+        .map(|(_, c)| c)
+        .find(|&c| line_of_sight(map, c, goal))
 }
 
 #[cfg(test)]
@@ -165,5 +197,53 @@ pub(crate) mod tests {
         let g = grid(&["#####", "#...#", "#####"]);
         let inflated = g.clone();
         assert_eq!(vantage(&g, &inflated, (2, 1), 0.6, 1.5), (2, 1));
+    }
+
+    /// 0.1 m cells: a known room (east) behind a wall with a 0.4 m door (x = 8, rows 4–7 from
+    /// the top), and through the door a thin strip of the unknown room (west) seen at a slant.
+    pub(crate) fn doorway_seen_at_a_slant() -> Grid {
+        grid(&[
+            "########################",
+            "#???????#..............#",
+            "#???????#..............#",
+            "#???????#..............#",
+            "#??????................#",
+            "#????..................#",
+            "#??....??..............#",
+            "#?....???..............#",
+            "#???????#..............#",
+            "#???????#..............#",
+            "########################",
+        ])
+    }
+
+    #[test]
+    fn an_unreachable_goal_is_looked_at_from_the_nearest_reachable_cell_in_sight() {
+        let g = doorway_seen_at_a_slant();
+        // Grown by 0.2 m the door is shut: only the east room is reachable.
+        let inflated = inflate(&g, 0.2);
+        let reachable = crate::search::Graph::new(&inflated).reachable(&[(16, 5)]);
+        let at = |(x, y): CellXY| reachable[y * g.width() + x];
+        let goal = (2, 3); // the strip's far end, at the edge of the unknown
+        assert!(!at(goal) && g.get(goal) == Cell::Free);
+        let v = viewpoint(&g, &reachable, goal, 2.5).expect("a cell that sees it");
+        assert!(at(v) && v.0 > 8, "{v:?}");
+        assert!(line_of_sight(&g, v, goal));
+        // Nearest: no reachable cell in sight of the goal is nearer.
+        let d2 = |c: CellXY| (c.0 as f64 - 2.0).powi(2) + (c.1 as f64 - 3.0).powi(2);
+        for y in 0..g.height() {
+            for x in 0..g.width() {
+                if at((x, y)) && line_of_sight(&g, (x, y), goal) {
+                    assert!(d2((x, y)) >= d2(v), "{:?} is nearer than {v:?}", (x, y));
+                }
+            }
+        }
+        // Out of range: none.
+        assert_eq!(viewpoint(&g, &reachable, goal, 0.5), None);
+        // Behind a wall without a door: none.
+        let g = grid(&["#########", "#..#....#", "#..#....#", "#########"]);
+        let reachable = crate::search::Graph::new(&g).reachable(&[(6, 1)]);
+        assert!(reachable[g.width() + 5] && !reachable[g.width() + 1]);
+        assert_eq!(viewpoint(&g, &reachable, (1, 1), 2.5), None);
     }
 }
