@@ -1,5 +1,6 @@
 //! `gcs plan`: one mission-planner step on a map file, for given robot positions.
 
+use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
@@ -66,6 +67,7 @@ fn parse_robot(s: &str) -> anyhow::Result<Option<[f64; 2]>> {
 
 /// Runs the command.
 pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
+    let mut stdout = std::io::stdout().lock();
     let robots: Vec<Option<[f64; 2]>> = args
         .robots
         .iter()
@@ -132,65 +134,70 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
             "complete": p.complete,
             "planning_time_s": elapsed,
         });
-        println!("{out}");
+        writeln!(stdout, "{out}")?;
     } else {
-        println!(
+        writeln!(
+            stdout,
             "{} frontiers ({} × {} cells of {} m), planned in {:.1} ms",
             p.frontiers.len(),
             map.width(),
             map.height(),
             map.resolution(),
             elapsed * 1e3
-        );
+        )?;
         for (i, f) in p.frontiers.iter().enumerate().take(20) {
             let g = p.inflated.center_of(f.goal);
-            println!(
+            writeln!(
+                stdout,
                 "  frontier {i:>3}: {:>5} cells, goal ({:7.2}, {:7.2}) m",
                 f.cells, g[0], g[1]
-            );
+            )?;
         }
         if p.frontiers.len() > 20 {
-            println!("  … {} more", p.frontiers.len() - 20);
+            writeln!(stdout, "  … {} more", p.frontiers.len() - 20)?;
         }
         if !p.frontiers.is_empty() && p.frontiers.len() <= 12 {
-            println!("cost matrix (m), robots × frontiers:");
+            writeln!(stdout, "cost matrix (m), robots × frontiers:")?;
             for (i, row) in p.costs.iter().enumerate() {
                 let cells: Vec<String> = row.iter().map(|c| format!("{c:7.2}")).collect();
-                println!("  robot {i}: {}", cells.join(" "));
+                writeln!(stdout, "  robot {i}: {}", cells.join(" "))?;
             }
         }
         for (i, r) in p.robots.iter().enumerate() {
             match (r.frontier, r.cost_m) {
                 (Some(f), Some(c)) => {
                     let g = p.inflated.center_of(p.frontiers[f].goal);
-                    println!(
+                    writeln!(
+                        stdout,
                         "robot {i} → frontier {f} at ({:.2}, {:.2}) m, path {c:.2} m, {} waypoints",
                         g[0],
                         g[1],
                         r.path.len()
-                    );
+                    )?;
                 }
-                _ => println!(
+                _ => writeln!(
+                    stdout,
                     "robot {i}: hover ({})",
                     r.hover_reason.unwrap_or("no target")
-                ),
+                )?,
             }
         }
-        println!(
+        writeln!(
+            stdout,
             "total path length {total:.2} m{}",
             if p.complete {
                 "; exploration complete"
             } else {
                 ""
             }
-        );
+        )?;
     }
     if let Some(out) = &args.png {
         let img = nav::render::draw_plan(&map, &p, &robots, 1000);
         img.save(out)
             .with_context(|| format!("cannot write {}", out.display()))?;
         if !args.json {
-            println!("picture: {}", out.display());
+            writeln!(stdout, "picture: {}", out.display())?;
         }
     }
     Ok(())

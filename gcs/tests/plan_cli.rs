@@ -149,6 +149,22 @@ fn text_output_names_every_robot() {
 }
 
 #[test]
+fn a_reader_that_stops_reading_ends_it_quietly() {
+    // `gcs plan … | head -1`: the pipe closes before the plan is printed.
+    let (reader, writer) = std::io::pipe().expect("a pipe");
+    drop(reader);
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_gcs"))
+        .args(["plan", "--map", &map("willow-full.yaml"), "--robot", "10,10"])
+        .args(["--explored-radius", "8"])
+        .stdout(writer)
+        .output()
+        .expect("run gcs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{:?}: {stderr}", out.status);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
+#[test]
 fn bad_input_gets_clear_errors() {
     let out = gcs(&["plan", "--map", "/nonexistent/map.yaml", "--robot", "0,0"]);
     assert_eq!(out.status.code(), Some(1));
