@@ -154,7 +154,13 @@ fn a_reader_that_stops_reading_ends_it_quietly() {
     let (reader, writer) = std::io::pipe().expect("a pipe");
     drop(reader);
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_gcs"))
-        .args(["plan", "--map", &map("willow-full.yaml"), "--robot", "10,10"])
+        .args([
+            "plan",
+            "--map",
+            &map("willow-full.yaml"),
+            "--robot",
+            "10,10",
+        ])
         .args(["--explored-radius", "8"])
         .stdout(writer)
         .output()

@@ -579,7 +579,11 @@ mod tests {
         assert_eq!(r.path.last(), Some(&goal));
         let f = &p.frontiers[r.frontier.unwrap()];
         assert!(f.centroid[0] < 0.8, "{:?}", f.centroid);
-        assert!(crate::search::line_of_sight(&g, f.goal, g.cell_of(f.centroid).unwrap()));
+        assert!(crate::search::line_of_sight(
+            &g,
+            f.goal,
+            g.cell_of(f.centroid).unwrap()
+        ));
     }
 
     #[test]

@@ -373,11 +373,18 @@ mod tests {
             "#########",
         ]);
         let graph = Graph::new(&g);
-        for starts in [vec![(1, 1)], vec![(5, 5), (1, 1)], vec![(0, 0)], vec![(4, 3)]] {
+        for starts in [
+            vec![(1, 1)],
+            vec![(5, 5), (1, 1)],
+            vec![(0, 0)],
+            vec![(4, 3)],
+        ] {
             let reach = graph.reachable(&starts);
             for (i, &r) in reach.iter().enumerate() {
                 let c = g.xy(i);
-                let searched = starts.iter().any(|&s| graph.dijkstra(s).cost(c) != UNREACHABLE);
+                let searched = starts
+                    .iter()
+                    .any(|&s| graph.dijkstra(s).cost(c) != UNREACHABLE);
                 assert_eq!(r, searched, "{starts:?} → {c:?}");
             }
         }

@@ -700,7 +700,10 @@ mod tests {
             .map(|k| house.cell_of([5.12, 3.5 + 0.05 * k as f64]))
             .filter(|&(x, y)| !house.material(x, y).is_solid())
             .count();
-        assert!((14..=15).contains(&door), "{door} free cells across the door");
+        assert!(
+            (14..=15).contains(&door),
+            "{door} free cells across the door"
+        );
     }
 
     #[test]
