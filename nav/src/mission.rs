@@ -215,22 +215,31 @@ pub fn plan(
     // left unexplored in 3 of 12 missions). A goal in the band is moved to the nearest free cell
     // of the inflated map in sight of it.
     let margin = config.frontier_margin_m.clamp(0.0, config.robot_radius_m);
-    let mut all = frontiers(
-        &inflate(map, margin),
-        config.min_frontier_cells,
-        config.max_frontier_span_m,
-    );
-    let free: Vec<bool> = inflated.cells().iter().map(|c| *c == Cell::Free).collect();
-    all.retain_mut(|f| {
-        if !free[inflated.index(f.goal)] {
-            let band = config.robot_radius_m - margin + 2.0 * map.resolution();
-            match viewpoint(map, &free, f.goal, band) {
-                Some(v) => f.goal = v,
-                None => return false,
+    let mut all = if margin < config.robot_radius_m {
+        let mut all = frontiers(
+            &inflate(map, margin),
+            config.min_frontier_cells,
+            config.max_frontier_span_m,
+        );
+        let free: Vec<bool> = inflated.cells().iter().map(|c| *c == Cell::Free).collect();
+        let band = config.robot_radius_m - margin + 2.0 * map.resolution();
+        all.retain_mut(|f| {
+            if !free[inflated.index(f.goal)] {
+                match viewpoint(map, &free, f.goal, band) {
+                    Some(v) => f.goal = v,
+                    None => return false,
+                }
             }
-        }
-        true
-    });
+            true
+        });
+        all
+    } else {
+        frontiers(
+            &inflated,
+            config.min_frontier_cells,
+            config.max_frontier_span_m,
+        )
+    };
     if config.view_range_m > 0.0 {
         // A goal no robot can reach is looked at from where one can (a doorway seen at a slant).
         let reachable = graph.reachable(&origins.iter().flatten().copied().collect::<Vec<_>>());
