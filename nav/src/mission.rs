@@ -165,14 +165,14 @@ pub fn plan_first_open(
             frontier_margin_m: config.robot_radius_m,
             ..config.clone()
         };
-        let plan = plan(map, robots, &strict)?;
-        let (open, none_seen) = (!plan.complete, plan.frontiers.is_empty());
-        chosen = Some(plan);
+        let step = plan(map, robots, &strict)?;
+        let (open, none_seen) = (!step.complete, step.frontiers.is_empty());
+        chosen = Some(step);
         if open {
             break;
         }
         if k + 1 == configs.len() && none_seen {
-            chosen = Some(crate::mission::plan(map, robots, config)?);
+            chosen = Some(plan(map, robots, config)?);
         }
     }
     Ok(chosen)
