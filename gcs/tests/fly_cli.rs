@@ -8,7 +8,7 @@ mod common;
 use std::path::Path;
 use std::sync::Arc;
 
-use common::{gcs, serve_fleet};
+use common::{gcs, serve_fleet, wall_clock_mission};
 use sitl::bridge::{BridgeConfig, BridgedVehicle, CameraBridge};
 use sitl::{EndpointSpec, Protocol, SimConfig, Sitl, SitlConfig, World};
 
@@ -31,6 +31,7 @@ fn fly(fleet: &Path, out: &Path) -> serde_json::Value {
 
 #[test]
 fn fly_explores_with_an_external_fleet_over_mavlink_and_the_shield_and_lands() {
+    let _alone = wall_clock_mission();
     let dir = std::env::temp_dir().join(format!("gcs-fly-{}", std::process::id()));
     let (sitl, fleet) = serve_fleet(&dir, &[Protocol::Mavlink, Protocol::Shield]);
     let out = dir.join("out");
@@ -102,6 +103,7 @@ fn fly_explores_with_an_autopilot_whose_camera_the_bridge_renders_at_its_reporte
     // As with ArduPilot SITL: the autopilot flies its own physics and knows nothing of cameras;
     // the bridge listens to it beside the station (both on the autopilot's UDP port, as on
     // MAVProxy's two outputs) and renders the building at the pose it reports.
+    let _alone = wall_clock_mission();
     let dir = std::env::temp_dir().join(format!("gcs-fly-bridge-{}", std::process::id()));
     let sitl = Sitl::start(SitlConfig {
         world: Arc::new(World::load("apartment").expect("built-in world")),

@@ -8,6 +8,16 @@ use std::sync::Arc;
 
 use sitl::{Camera, EndpointSpec, Protocol, SimConfig, Sitl, SitlConfig, World};
 
+/// Held by a test while it flies a mission on the wall clock: one at a time in a test binary.
+/// Two such missions at once on a two-core machine starve each other's SLAM, and the bridge
+/// test's drone then loses track of frames that arrive late (its bound is on frames lost).
+pub fn wall_clock_mission() -> std::sync::MutexGuard<'static, ()> {
+    static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
 /// Runs `gcs` with `args` and returns what it did.
 pub fn gcs(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_gcs"))
