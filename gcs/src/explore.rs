@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
 use nav::grid::Grid;
-use nav::mission::Strategy;
+use nav::mission::{PlannerConfig, Strategy};
 use sitl::World;
 use slam::eval::{Alignment, ate, loop_closure_errors};
 use slam::system::{Slam, SlamConfig};
@@ -57,6 +57,11 @@ pub struct SimArgs {
     /// at 25 % left).
     #[arg(long, value_name = "MINUTES", default_value_t = 12.0)]
     pub flight_time: f64,
+    /// Frontiers within this distance of each other, in sight, are one region, and drones are
+    /// spread one to a region before any region gets a second, metres; 0: off (each frontier a
+    /// region of its own).
+    #[arg(long, value_name = "METRES", default_value_t = PlannerConfig::default().region_radius_m)]
+    pub region_radius: f64,
 }
 
 /// Arguments of `gcs explore`.
@@ -235,6 +240,12 @@ fn validate(args: &ExploreArgs) -> anyhow::Result<Vec<Fault>> {
             args.sim.flight_time
         );
     }
+    if !(args.sim.region_radius.is_finite() && (0.0..=50.0).contains(&args.sim.region_radius)) {
+        bail!(
+            "--region-radius {} must be between 0 (off) and 50 metres",
+            args.sim.region_radius
+        );
+    }
     args.log.validate()?;
     if !(args.timeout.is_finite() && args.timeout > 0.0) {
         bail!(
@@ -370,6 +381,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
             world: Some(world.name().into()),
             strategy: args.sim.strategy.name().into(),
             planner_radii: RuntimeConfig::default().planner_radii,
+            region_radius_m: Some(args.sim.region_radius),
             drones: fleet
                 .drones
                 .iter()
@@ -395,6 +407,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
     let runtime = Runtime::start(
         RuntimeConfig {
             strategy: args.sim.strategy.strategy(),
+            region_radius_m: args.sim.region_radius,
             timeout: Some(args.timeout),
             // In the window the operator starts the mission (again, after a landing), and the
             // runtime lasts until the window closes.

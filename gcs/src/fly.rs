@@ -163,6 +163,7 @@ pub fn run_with(args: &FlyArgs, window: Option<Window>) -> anyhow::Result<()> {
             world: None,
             strategy: "hungarian".into(),
             planner_radii: RuntimeConfig::default().planner_radii,
+            region_radius_m: Some(RuntimeConfig::default().region_radius_m),
             drones: fleet
                 .iter()
                 .map(|v| SetupDrone::new(&v.name, v.start, &body_from_camera, v.altitude))

@@ -36,6 +36,10 @@ pub struct PlanArgs {
     /// Assignment strategy.
     #[arg(long, value_enum, default_value = "hungarian")]
     strategy: StrategyArg,
+    /// Frontiers within this distance of each other, in sight, are one region, and robots are
+    /// spread one to a region first, metres; 0: off.
+    #[arg(long, value_name = "METRES", default_value_t = PlannerConfig::default().region_radius_m)]
+    region_radius: f64,
     /// Treat the map as the whole building and plan on what the robots would have explored within
     /// this many metres of travel from their positions (to try the planner on a complete map).
     #[arg(long, value_name = "METRES")]
@@ -76,6 +80,9 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
     if !(args.robot_radius.is_finite() && args.robot_radius >= 0.0) {
         bail!("--robot-radius must be zero or more metres");
     }
+    if !(args.region_radius.is_finite() && args.region_radius >= 0.0) {
+        bail!("--region-radius must be zero (off) or more metres");
+    }
     let mut map = Grid::load(&args.map)?;
     if let Some(r) = args.explored_radius {
         if !(r.is_finite() && r > 0.0) {
@@ -87,6 +94,7 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
     let config = PlannerConfig {
         robot_radius_m: args.robot_radius,
         min_frontier_cells: args.min_frontier.max(1),
+        region_radius_m: args.region_radius,
         strategy: match args.strategy {
             StrategyArg::Hungarian => Strategy::Hungarian,
             StrategyArg::Greedy => Strategy::Greedy,

@@ -42,6 +42,9 @@ pub struct Setup {
     /// The planner's robot radii, tried widest first (absent from older logs).
     #[serde(default)]
     pub planner_radii: Vec<f64>,
+    /// The planner's region radius, metres (absent from logs recorded before regions: 0, off).
+    #[serde(default)]
+    pub region_radius_m: Option<f64>,
     /// The drones.
     pub drones: Vec<SetupDrone>,
 }

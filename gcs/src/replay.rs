@@ -335,6 +335,7 @@ fn planner_configs(setup: &Setup) -> Vec<PlannerConfig> {
         .map(|robot_radius_m| PlannerConfig {
             strategy,
             robot_radius_m,
+            region_radius_m: setup.region_radius_m.unwrap_or(0.0),
             ..PlannerConfig::default()
         })
         .collect()
@@ -449,9 +450,23 @@ mod tests {
             world: None,
             strategy: "hungarian".into(),
             planner_radii: vec![],
+            region_radius_m: None,
             drones: vec![],
         });
         assert_eq!(configs.len(), RuntimeConfig::default().planner_radii.len());
+        // Logs from before regions planned without them; newer ones say what they used.
+        assert!(configs.iter().all(|c| c.region_radius_m == 0.0));
+        let with_regions = planner_configs(&Setup {
+            version: 1,
+            world: None,
+            strategy: "greedy".into(),
+            planner_radii: vec![0.3],
+            region_radius_m: Some(2.5),
+            drones: vec![],
+        });
+        assert_eq!(with_regions.len(), 1);
+        assert_eq!(with_regions[0].region_radius_m, 2.5);
+        assert_eq!(with_regions[0].strategy, Strategy::Greedy);
         let robots = [Some([0.5, 1.0])];
         let live = nav::mission::plan_first_open(&grid, &robots, &configs)
             .expect("plans")

@@ -400,6 +400,10 @@ fn bad_explore_arguments_are_refused_before_anything_starts() {
             "between 1 and 600 minutes",
         ),
         (
+            vec!["explore", "--region-radius=-1"],
+            "must be between 0 (off) and 50 metres",
+        ),
+        (
             vec!["explore", "--timeout=-5"],
             "positive number of simulated seconds",
         ),

@@ -187,6 +187,17 @@ fn bad_input_gets_clear_errors() {
     let out = gcs(&["plan", "--map", &map("willow-full.yaml"), "--robot", "1;2"]);
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("expected X,Y"));
+    let out = gcs(&[
+        "plan",
+        "--map",
+        &map("willow-full.yaml"),
+        "--robot",
+        "12,30",
+        "--region-radius",
+        "NaN",
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--region-radius must be"));
     let out = gcs(&["plan", "--map", &map("willow-full.yaml")]);
     assert_eq!(out.status.code(), Some(2), "--robot is required");
 }

@@ -131,6 +131,63 @@ pub fn greedy(cost: &[Vec<f64>]) -> Vec<Option<usize>> {
     out
 }
 
+/// Robots to frontiers spread over regions (`region[f]` is frontier f's, e.g. from
+/// [`crate::frontier::regions`]), each round solved by `solve` ([`hungarian`] or [`greedy`]):
+/// first every robot to a region of its own (its cost to a region: to the region's cheapest
+/// frontier, which is the one it gets), least total cost — so two robots do not head for two
+/// pieces of one room's frontier while another room waits; then robots left over, when there are
+/// more robots than regions, to the frontiers no robot has yet. A robot may still be left
+/// without a frontier when there are more robots than frontiers. With every frontier a region of
+/// its own this is `solve(cost)`.
+pub fn spread(
+    cost: &[Vec<f64>],
+    region: &[usize],
+    solve: fn(&[Vec<f64>]) -> Vec<Option<usize>>,
+) -> Vec<Option<usize>> {
+    let regions = region.iter().map(|&g| g + 1).max().unwrap_or(0);
+    // Per robot and region: its cheapest frontier there.
+    let best: Vec<Vec<Option<usize>>> = cost
+        .iter()
+        .map(|row| {
+            let mut best: Vec<Option<usize>> = vec![None; regions];
+            for (f, (&c, &g)) in row.iter().zip(region).enumerate() {
+                if best[g].is_none_or(|b| c < row[b]) {
+                    best[g] = Some(f);
+                }
+            }
+            best
+        })
+        .collect();
+    let by_region: Vec<Vec<f64>> = best
+        .iter()
+        .zip(cost)
+        .map(|(b, row)| {
+            b.iter()
+                .map(|f| f.map_or(f64::INFINITY, |f| row[f]))
+                .collect()
+        })
+        .collect();
+    let mut out: Vec<Option<usize>> = solve(&by_region)
+        .into_iter()
+        .zip(&best)
+        .map(|(g, b)| g.and_then(|g| b[g]))
+        .collect();
+    let mut taken = vec![false; region.len()];
+    out.iter().flatten().for_each(|&f| taken[f] = true);
+    let idle: Vec<usize> = (0..cost.len()).filter(|&r| out[r].is_none()).collect();
+    let free: Vec<usize> = (0..region.len()).filter(|&f| !taken[f]).collect();
+    if !idle.is_empty() && !free.is_empty() {
+        let rest: Vec<Vec<f64>> = idle
+            .iter()
+            .map(|&r| free.iter().map(|&f| cost[r][f]).collect())
+            .collect();
+        for (&r, f) in idle.iter().zip(solve(&rest)) {
+            out[r] = f.map(|f| free[f]);
+        }
+    }
+    out
+}
+
 /// Total cost of an assignment.
 pub fn total(cost: &[Vec<f64>], assignment: &[Option<usize>]) -> f64 {
     assignment
@@ -213,6 +270,34 @@ mod tests {
     }
 
     #[test]
+    fn robots_spread_over_regions_before_a_region_gets_a_second() {
+        // Frontiers 0 and 1 are two pieces of one room's frontier, near both robots; frontier 2
+        // is another room, further. By least total cost both robots take the near room.
+        let c = vec![vec![1.0, 2.0, 6.0], vec![2.0, 1.0, 5.0]];
+        assert_eq!(hungarian(&c), vec![Some(0), Some(1)]);
+        let region = [0, 0, 1];
+        for solve in [hungarian, greedy] {
+            let a = spread(&c, &region, solve);
+            // One to each room: robot 0 to the near room (1 + 5 = 6 beats 2 + 6 = 8).
+            assert_eq!(a, vec![Some(0), Some(2)]);
+        }
+        // A third robot, with no region left, takes the frontier no robot has.
+        let c3 = vec![c[0].clone(), c[1].clone(), vec![1.5, 1.6, 9.0]];
+        assert_eq!(
+            spread(&c3, &region, hungarian),
+            vec![Some(0), Some(2), Some(1)]
+        );
+        // More robots than frontiers: the last hovers.
+        let c4 = vec![
+            c3[0].clone(),
+            c3[1].clone(),
+            c3[2].clone(),
+            vec![9.0, 9.0, 9.0],
+        ];
+        assert_eq!(spread(&c4, &region, hungarian)[3], None);
+    }
+
+    #[test]
     fn padding_makes_square() {
         let p = pad_square(&[vec![1.0, 2.0, 3.0]], 0.0);
         assert_eq!(p.len(), 3);
@@ -239,6 +324,34 @@ mod tests {
             // Padding to square with zero-cost dummies (the thesis's way) reaches the same optimum.
             let square = pad_square(&cost, 0.0);
             prop_assert!((total(&square, &hungarian(&square)) - total(&cost, &a)).abs() < 1e-9);
+        }
+
+        #[test]
+        fn spreading_gives_every_robot_its_own_frontier_and_each_region_one_first(
+            rows in 1usize..=6, cols in 1usize..=6,
+            values in proptest::collection::vec(0u32..1000, 36),
+            labels in proptest::collection::vec(0usize..3, 6),
+        ) {
+            let cost: Vec<Vec<f64>> = (0..rows).map(|r| (0..cols).map(|c| f64::from(values[r * 6 + c]) / 10.0).collect()).collect();
+            // Region ids 0..k, each used.
+            let mut ids = std::collections::BTreeMap::new();
+            let region: Vec<usize> = labels[..cols].iter().map(|l| { let n = ids.len(); *ids.entry(*l).or_insert(n) }).collect();
+            let regions = ids.len();
+            let a = spread(&cost, &region, hungarian);
+            prop_assert_eq!(a.iter().flatten().count(), rows.min(cols));
+            let mut seen = std::collections::HashSet::new();
+            for c in a.iter().flatten() {
+                prop_assert!(seen.insert(*c));
+            }
+            // Every region has a robot before any has two.
+            let mut per_region = vec![0; regions];
+            a.iter().flatten().for_each(|&f| per_region[region[f]] += 1);
+            if per_region.iter().any(|&n| n > 1) {
+                prop_assert!(per_region.iter().all(|&n| n >= 1), "{:?}", per_region);
+            }
+            // Each frontier a region of its own: the plain least-cost assignment.
+            let own: Vec<usize> = (0..cols).collect();
+            prop_assert!((total(&cost, &spread(&cost, &own, hungarian)) - total(&cost, &hungarian(&cost))).abs() < 1e-9);
         }
     }
 }

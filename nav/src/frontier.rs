@@ -5,7 +5,7 @@ use image::{GrayImage, Luma};
 use imageproc::region_labelling::{Connectivity, connected_components};
 
 use crate::grid::{Cell, CellXY, Grid};
-use crate::search::nearest_free;
+use crate::search::{line_of_sight, nearest_free};
 
 /// One frontier: a connected group of frontier cells.
 #[derive(Debug, Clone, PartialEq)]
@@ -80,6 +80,37 @@ pub fn frontiers(grid: &Grid, min_cells: usize, max_span_m: f64) -> Vec<Frontier
         .collect();
     out.sort_by(|a, b| b.cells.cmp(&a.cells).then(a.goal.cmp(&b.goal)));
     out
+}
+
+/// Frontiers grouped into regions, one drone's worth of exploring each: per frontier, the index of
+/// its region. Largest frontier first, each frontier not yet in a region starts one and takes in
+/// every later one whose goal lies within `radius_m` of its own and in sight of it across cells
+/// `map` knows as free (a drone looking around at one goal sees the other frontier too; a wall
+/// between them keeps them apart). `radius_m` ≤ 0: every frontier is a region of its own.
+pub fn regions(map: &Grid, frontiers: &[Frontier], radius_m: f64) -> Vec<usize> {
+    if radius_m.is_nan() || radius_m <= 0.0 {
+        return (0..frontiers.len()).collect();
+    }
+    let mut region = vec![usize::MAX; frontiers.len()];
+    let mut next = 0;
+    for seed in 0..frontiers.len() {
+        if region[seed] != usize::MAX {
+            continue;
+        }
+        region[seed] = next;
+        let a = map.center_of(frontiers[seed].goal);
+        for other in seed + 1..frontiers.len() {
+            let b = map.center_of(frontiers[other].goal);
+            if region[other] == usize::MAX
+                && (a[0] - b[0]).hypot(a[1] - b[1]) <= radius_m
+                && line_of_sight(map, frontiers[seed].goal, frontiers[other].goal)
+            {
+                region[other] = next;
+            }
+        }
+        next += 1;
+    }
+    region
 }
 
 /// A group of frontier cells (their centres, metres) as is when it fits in `max_span_m` each
@@ -174,6 +205,61 @@ pub(crate) mod tests {
         }
         let total: usize = cut.iter().map(|f| f.cells).sum();
         assert_eq!(total, whole[0].cells);
+    }
+
+    /// Two rooms side by side (0.1 m cells), openings in their north walls: the west room's at
+    /// x ≈ 0.5 m and 1.2 m (near each other, in sight), and at 3.6 m (over 2.5 m from the first);
+    /// the east room's at 4.6 m, near the west room's last but behind the wall between them.
+    pub(crate) fn two_rooms_with_openings() -> Grid {
+        let width = 50;
+        let openings = [2..7, 10..15, 34..39, 44..49];
+        let top: String = (0..width)
+            .map(|x| {
+                if openings.iter().any(|o| o.contains(&x)) {
+                    '?'
+                } else {
+                    '#'
+                }
+            })
+            .collect();
+        let room: String = (0..width)
+            .map(|x| {
+                if [0, 40, width - 1].contains(&x) {
+                    '#'
+                } else {
+                    '.'
+                }
+            })
+            .collect();
+        let mut rows = vec![top.as_str()];
+        rows.extend(std::iter::repeat_n(room.as_str(), 12));
+        let bottom = "#".repeat(width);
+        rows.push(&bottom);
+        grid(&rows)
+    }
+
+    #[test]
+    fn frontiers_near_each_other_in_sight_are_one_region_and_a_wall_parts_them() {
+        let g = two_rooms_with_openings();
+        let all = frontiers(&g, 1, 4.0);
+        let x = |f: &Frontier| g.center_of(f.goal)[0];
+        let mut by_x: Vec<usize> = (0..all.len()).collect();
+        by_x.sort_by(|&a, &b| x(&all[a]).total_cmp(&x(&all[b])));
+        assert_eq!(by_x.len(), 4, "{all:?}");
+        let region = regions(&g, &all, 2.5);
+        let r: Vec<usize> = by_x.iter().map(|&f| region[f]).collect();
+        // The first two together; the third too far; the fourth near it, but behind the wall.
+        assert_eq!(r[0], r[1], "{r:?}");
+        assert!(r[2] != r[0] && r[3] != r[2] && r[3] != r[0], "{r:?}");
+        // With no radius, each its own; with a large one the wall still parts the rooms.
+        let own = regions(&g, &all, 0.0);
+        assert_eq!(
+            own.iter().collect::<std::collections::HashSet<_>>().len(),
+            4
+        );
+        let wide = regions(&g, &all, 10.0);
+        let w: Vec<usize> = by_x.iter().map(|&f| wide[f]).collect();
+        assert!(w[0] == w[1] && w[1] == w[2] && w[3] != w[0], "{w:?}");
     }
 
     #[test]

@@ -1,9 +1,9 @@
 //! The mission planner step (thesis §4.4, Algorithms 1–4): from the latest map and every robot's
 //! pose, each robot's frontier target and path, a hover, or "exploration complete".
 
-use crate::assignment::{greedy, hungarian};
+use crate::assignment::{greedy, hungarian, spread};
 use crate::clearance::centred_path;
-use crate::frontier::{Frontier, frontiers};
+use crate::frontier::{Frontier, frontiers, regions};
 use crate::grid::{Cell, CellXY, Grid};
 use crate::inflate::inflate;
 use crate::search::{Graph, UNREACHABLE, dijkstra, metres, nearest_free};
@@ -58,6 +58,14 @@ pub struct PlannerConfig {
     /// enough to hide the unknown inside walls, not so much that a room seen through a door
     /// at a slant is hidden by the door's jambs.
     pub frontier_margin_m: f64,
+    /// Frontiers whose goals lie within this distance of each other, in sight, are one region,
+    /// and robots are spread one to a region before any region gets a second
+    /// ([`crate::assignment::spread`]), metres: a robot looking around at one goal sees the
+    /// others (the camera reaches 4 m). 0 (the default): every frontier is a region of its own.
+    /// Off by default: on the apartment (true poses, seeds 0–5) 2.5 m took two drones 206 s on
+    /// average against 225 s, but four drones 170 s against 161 s — within the spread of
+    /// single runs either way.
+    pub region_radius_m: f64,
 }
 
 impl Default for PlannerConfig {
@@ -74,6 +82,7 @@ impl Default for PlannerConfig {
             comfort_m: 0.0,
             view_range_m: 2.5,
             frontier_margin_m: 0.1,
+            region_radius_m: 0.0,
         }
     }
 }
@@ -298,17 +307,18 @@ pub fn plan(
     let assignment = if frontiers.is_empty() {
         vec![None; robots.len()]
     } else {
+        let region = regions(map, &frontiers, config.region_radius_m);
         match config.strategy {
             // The thesis pads the matrix to square with zero-cost dummies; the rectangular solver
             // reaches the same optimum without the O(n³) cost of the padding.
-            Strategy::Hungarian => hungarian(&costs),
+            Strategy::Hungarian => spread(&costs, &region, hungarian),
             Strategy::Greedy => {
                 // The baseline only considers pairs that can actually be flown.
                 let usable: Vec<Vec<f64>> = raw
                     .iter()
                     .map(|r| r.iter().map(|c| c.unwrap_or(f64::INFINITY)).collect())
                     .collect();
-                greedy(&usable)
+                spread(&usable, &region, greedy)
             }
         }
     };
@@ -501,6 +511,32 @@ mod tests {
             min_frontier_cells: 2,
             ..Default::default()
         }
+    }
+
+    #[test]
+    fn two_robots_in_a_room_go_to_two_regions_not_to_two_pieces_of_one() {
+        // The west room's openings at x ≈ 0.5 and 1.2 m are one region; the one at 3.6 m another.
+        let g = crate::frontier::tests::two_rooms_with_openings();
+        let robots = [Some([0.5, 0.5]), Some([1.2, 0.5])];
+        let goal_x = |config: &PlannerConfig| -> Vec<f64> {
+            let p = plan(&g, &robots, config).unwrap();
+            p.robots.iter().map(|r| r.goal.unwrap()[0]).collect()
+        };
+        let config = PlannerConfig {
+            robot_radius_m: 0.2,
+            min_frontier_cells: 2,
+            region_radius_m: 2.5,
+            ..Default::default()
+        };
+        // Least total path length alone: each to the opening above it.
+        let near = goal_x(&PlannerConfig {
+            region_radius_m: 0.0,
+            ..config.clone()
+        });
+        assert!(near[0] < 1.0 && (1.0..2.0).contains(&near[1]), "{near:?}");
+        // Spread over regions: the robot nearer the far opening takes it.
+        let spread = goal_x(&config);
+        assert!(spread[0] < 2.0 && spread[1] > 3.0, "{spread:?}");
     }
 
     #[test]

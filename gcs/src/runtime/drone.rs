@@ -401,6 +401,7 @@ impl Drone {
             return;
         }
         if goal != self.goal {
+            tracing::debug!(drone = self.id + 1, from = ?self.goal, to = ?goal, "new goal");
             let e = self.ekf.estimate();
             self.progress = (now, [e.position[0], e.position[1]]);
         }

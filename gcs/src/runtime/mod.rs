@@ -41,6 +41,9 @@ pub struct RuntimeConfig {
     /// Plan with obstacles grown by the first of these radii that still leaves a reachable
     /// frontier (a margin for tracking errors first, narrower gaps later), metres.
     pub planner_radii: Vec<f64>,
+    /// Frontiers within this distance of each other, in sight, are one region, and drones are
+    /// spread one to a region first ([`PlannerConfig::region_radius_m`]), metres; 0: off.
+    pub region_radius_m: f64,
     /// Control period, seconds (mission clock).
     pub control_period: f64,
     /// Mission-planner period, seconds.
@@ -65,6 +68,7 @@ impl Default for RuntimeConfig {
         Self {
             strategy: Strategy::Hungarian,
             planner_radii: vec![0.45, 0.35, 0.25],
+            region_radius_m: PlannerConfig::default().region_radius_m,
             control_period: 0.1,
             plan_period: 1.0,
             drone: DroneConfig::default(),
@@ -745,6 +749,7 @@ impl Mission {
                 strategy: self.config.strategy,
                 robot_radius_m,
                 blacklist: self.blacklist.ignored(),
+                region_radius_m: self.config.region_radius_m,
                 ..PlannerConfig::default()
             })
             .collect();
