@@ -761,6 +761,32 @@ impl Mission {
                 return;
             }
         };
+        let elapsed = self.started.map_or(0.0, |s| now - s);
+        // Complete only when every exploring drone could plan: one without a pose might be
+        // the only one that can reach what is left.
+        let all_valid = robots.iter().all(Option::is_some);
+        let airborne = self.drones.iter().all(|d| d.phase != Phase::TakingOff);
+        let ending = plan.complete && all_valid && airborne && elapsed > self.config.min_mission_s;
+        // Frontiers seen but out of reach (a room glimpsed through a door at a slant, the doorway
+        // itself not yet seen as free): before the end, the last resorts — each looked at from
+        // the nearest reachable spot in sight of it, and the thin frontier margin. Only here,
+        // not whenever nothing is reachable: at the start of a flight that lost the camera
+        // bridge's drone (see `plan_first_open`). `gcs replay` does not rerun this step.
+        let plan = match planners.last() {
+            Some(last) if ending && !plan.frontiers.is_empty() => {
+                match nav::mission::plan(&grid, &robots, last) {
+                    Ok(look) if !look.complete => {
+                        tracing::debug!(
+                            out_of_reach = plan.frontiers.len(),
+                            "frontiers out of reach: looked at from where a drone can"
+                        );
+                        look
+                    }
+                    _ => plan,
+                }
+            }
+            _ => plan,
+        };
         self.frontiers = plan
             .frontiers
             .iter()
@@ -793,12 +819,7 @@ impl Mission {
             });
             self.last_plan_record = now;
         }
-        let elapsed = self.started.map_or(0.0, |s| now - s);
-        // Complete only when every exploring drone could plan: one without a pose might be
-        // the only one that can reach what is left.
-        let all_valid = robots.iter().all(Option::is_some);
-        let airborne = self.drones.iter().all(|d| d.phase != Phase::TakingOff);
-        if plan.complete && all_valid && airborne && elapsed > self.config.min_mission_s {
+        if ending && plan.complete {
             // Goals given up once may have failed by chance: one more look before the end.
             let released = self.blacklist.second_look(&plan.ignored);
             if released > 0 {
