@@ -33,8 +33,16 @@ fn overrides(report: &Value) -> Vec<Vec<f64>> {
 
 /// Flies the standard probe: mode, arm, sticks for 1.5 s, release, disarm; checks telemetry.
 fn fly(v: &MavlinkVehicle) {
-    assert!(eventually(5 * S, || v.telemetry().battery.is_some()
-        && v.telemetry().attitude.is_some()));
+    // Every field checked below has arrived (with the legacy REQUEST_DATA_STREAM fallback the
+    // streams start one request at a time, so DISTANCE_SENSOR may come after the rest).
+    assert!(eventually(5 * S, || {
+        let t = v.telemetry();
+        t.battery.is_some()
+            && t.attitude.is_some()
+            && t.height_m.is_some()
+            && t.position_m.is_some()
+            && t.mode.is_some()
+    }));
     let t = v.telemetry();
     let b = t.battery.expect("battery");
     assert!(
