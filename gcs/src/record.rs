@@ -108,6 +108,10 @@ pub struct DroneState {
     pub sticks: Option<[f32; 4]>,
     /// The filter's pose (x, y, z, yaw), if valid.
     pub pose: Option<[f64; 4]>,
+    /// The filter's roll and pitch, radians (what the SLAM checked registrations against;
+    /// absent from older logs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tilt: Option<[f64; 2]>,
 }
 
 /// One exploring drone in a planner decision, as written on `/plan` (`drone` 1-based there).
@@ -164,6 +168,8 @@ pub enum Record {
         sticks: Option<Sticks>,
         /// The filter's pose.
         pose: Option<[f64; 4]>,
+        /// The filter's roll and pitch.
+        tilt: Option<[f64; 2]>,
         /// Its phase.
         phase: &'static str,
     },
@@ -606,6 +612,7 @@ fn write_record(w: &mut McapWriter, ch: &mut Channels, r: &Record) -> Result<u64
             telemetry,
             sticks,
             pose,
+            tilt,
             phase,
         } => {
             let k = drone + 1;
@@ -621,6 +628,7 @@ fn write_record(w: &mut McapWriter, ch: &mut Channels, r: &Record) -> Result<u64
                 mode: telemetry.mode.clone(),
                 sticks: sticks.map(|s| [s.roll, s.pitch, s.yaw, s.throttle]),
                 pose: *pose,
+                tilt: *tilt,
             };
             let c = ch.json(w, &format!("/drone{k}/state"), "gcs.DroneState")?;
             ch.write(
@@ -851,6 +859,22 @@ mod tests {
         }
         std::fs::remove_dir_all(&dir).ok();
         (colour, other)
+    }
+
+    #[test]
+    fn drone_states_carry_the_filters_tilt_and_older_ones_read_without_it() {
+        let older = r#"{"t":1.5,"phase":"exploring","height_m":0.9,"yaw_rad":0.1,
+            "attitude":[0.01,0.02,0.1],"battery_v":12.1,"battery_pct":80,"armed":true,
+            "mode":"ALT_HOLD","sticks":[0,0,0,0],"pose":[1,2,0.9,0.1]}"#;
+        let s: DroneState = serde_json::from_str(older).expect("an older state");
+        assert_eq!((s.t, s.tilt), (1.5, None));
+        let now = DroneState {
+            tilt: Some([0.03, -0.04]),
+            ..s
+        };
+        let json = serde_json::to_string(&now).expect("json");
+        let back: DroneState = serde_json::from_str(&json).expect("read back");
+        assert_eq!(back, now);
     }
 
     #[test]

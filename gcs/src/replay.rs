@@ -349,6 +349,7 @@ fn sample_at(states: &[DroneState], t: f64) -> Option<SensorSample> {
         t: s.t,
         heading: s.yaw_rad.map(f64::from),
         height: s.height_m.map(f64::from),
+        tilt: s.tilt,
         body: s.pose,
     })
 }

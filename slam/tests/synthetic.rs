@@ -40,6 +40,8 @@ struct Flight {
     heading_bias: Option<f64>,
     /// The depth camera reads nothing (covered, or facing a bare wall too close).
     blind: bool,
+    /// Added to the IMU's roll, radians (`None`: no roll and pitch given).
+    roll_bias: Option<f64>,
 }
 
 fn body_from_camera() -> Isometry3<f64> {
@@ -87,6 +89,7 @@ impl Flight {
             known_poses: false,
             heading_bias: Some(0.0),
             blind: false,
+            roll_bias: Some(0.0),
         }
     }
 
@@ -156,6 +159,10 @@ impl Flight {
                     },
                     heading: self.heading_bias.map(|b| readings.yaw + b),
                     height: readings.sonar,
+                    tilt: self.roll_bias.map(|b| {
+                        let s = self.sim.vehicle(k).state();
+                        [s.roll + b, s.pitch]
+                    }),
                     predicted_body: self.predicted_height_error.map(|dz| {
                         let s = self.sim.vehicle(k).state();
                         Isometry3::new(
@@ -423,6 +430,50 @@ fn on_a_vehicle_registrations_off_its_measured_height_are_refused() {
 }
 
 #[test]
+fn registrations_that_contradict_the_imus_gravity_are_refused() {
+    // Flying to and fro and turning, the IMU's roll and pitch given: right registrations agree
+    // with them (so the conventions of both agree). Then an IMU whose roll reads 15° off: no
+    // registration can agree with it, so none is taken.
+    let run = |roll_bias: f64| {
+        let mut f = Flight::new(1, &[true], SlamConfig::default());
+        f.roll_bias = Some(roll_bias);
+        let (x, y, yaw) = start_of(&f, 0);
+        let (c, s) = (yaw.cos(), yaw.sin());
+        f.fly(
+            &[vec![
+                [x, y, 1.0, yaw],
+                [x + 0.8 * c, y + 0.8 * s, 1.0, yaw],
+                [x, y, 1.0, yaw + 0.8],
+            ]],
+            20.0,
+        );
+        f
+    };
+    let good = run(0.0);
+    assert!(
+        good.lost[0] * 20 <= good.frames[0],
+        "{} of {} lost: {:?}",
+        good.lost[0],
+        good.frames[0],
+        &good.lost_why[..good.lost_why.len().min(3)]
+    );
+    let off = run(15f64.to_radians());
+    assert!(
+        off.lost[0] + 1 >= off.frames[0],
+        "{} of {} lost",
+        off.lost[0],
+        off.frames[0]
+    );
+    assert!(
+        off.lost_why
+            .iter()
+            .any(|w| w.contains("from the IMU's gravity")),
+        "{:?}",
+        &off.lost_why[..off.lost_why.len().min(3)]
+    );
+}
+
+#[test]
 fn a_drone_flying_a_loop_through_the_apartment_stays_within_centimetres() {
     // Start 1 is in the south-east room; out through its door to the corridor, west along it,
     // and back: a loop of about 14 m.
@@ -515,6 +566,7 @@ fn a_camera_on_the_real_fr1_xyz_motion_is_tracked_to_within_two_centimetres() {
                 },
                 heading: None,
                 height: None,
+                tilt: None,
                 predicted_body: None,
                 known_camera_pose: None,
             })

@@ -439,6 +439,13 @@ impl Drone {
             .map(|e| [e.position[0], e.position[1], e.position[2], e.attitude[2]])
     }
 
+    /// The filter's roll and pitch (radians): the attitude the vehicle reports, else what the
+    /// sticks sent make of it.
+    pub fn tilt(&self) -> [f64; 2] {
+        let a = self.ekf.estimate().attitude;
+        [a[0], a[1]]
+    }
+
     /// One control tick at mission time `now`.
     pub fn tick(&mut self, now: f64, config: &DroneConfig) -> Option<DroneEvent> {
         let dt = self.last_tick.map_or(0.1, |t| (now - t).clamp(0.01, 1.0));

@@ -628,6 +628,7 @@ impl Mission {
                     t: now,
                     heading: t.yaw_rad.map(f64::from),
                     height: t.height_m.map(f64::from),
+                    tilt: Some(d.tilt()),
                     body: d.pose(),
                 },
             );
@@ -638,6 +639,7 @@ impl Mission {
                     telemetry: t,
                     sticks: d.sticks,
                     pose: d.pose(),
+                    tilt: Some(d.tilt()),
                     phase: d.phase.name(),
                 });
             }

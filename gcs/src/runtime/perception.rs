@@ -40,6 +40,9 @@ pub struct SensorSample {
     pub heading: Option<f64>,
     /// Rangefinder height above the floor, metres.
     pub height: Option<f64>,
+    /// Roll and pitch (FLU, radians): the attitude the vehicle reports, fused with the sticks
+    /// in the drone's filter (the filter's alone where the link reports no attitude).
+    pub tilt: Option<[f64; 2]>,
     /// The filter's body pose (x, y, z, yaw), if valid.
     pub body: Option<[f64; 4]>,
 }
@@ -351,6 +354,7 @@ pub fn slam_frame(f: &CameraFrame, sample: Option<SensorSample>, known: bool) ->
         },
         heading: sample.and_then(|s| s.heading),
         height: sample.and_then(|s| s.height),
+        tilt: sample.and_then(|s| s.tilt),
         predicted_body: predicted,
         known_camera_pose: f.truth.filter(|_| known),
     })
@@ -365,6 +369,7 @@ mod tests {
             t,
             heading: Some(heading),
             height: Some(0.9),
+            tilt: None,
             body: None,
         }
     }
