@@ -7,8 +7,8 @@ use std::sync::mpsc::{Receiver, TryRecvError, channel};
 
 use link::{Command, CommandError, FlightMode, LinkState, Sticks, VehicleLink};
 use nav::control::{PidGains, Pose3, PositionController, PositionGains};
-use nav::local::{Follow, FollowerConfig, PathFollower, Pose2};
-use slam::ekf::{Ekf, EkfConfig, Input};
+use nav::local::{Follow, FollowerConfig, PathFollower, Pose2, wrap_angle};
+use slam::ekf::{Ekf, EkfConfig, Input, Update};
 
 /// What a drone is doing.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -99,6 +99,9 @@ pub struct DroneConfig {
     pub scan_s: f64,
     /// Yaw stick while hovering without a pose (a slow turn so the camera finds known views).
     pub blind_yaw: f32,
+    /// Without a pose, turn back to the heading of the last SLAM keyframe for this long first,
+    /// seconds.
+    pub blind_turn_back_s: f64,
     /// Land after this long without a valid pose, seconds.
     pub blind_land_s: f64,
     /// Return to the start and land below this battery charge, percent.
@@ -150,6 +153,7 @@ impl Default for DroneConfig {
             stuck_s: 15.0,
             scan_s: 10.0,
             blind_yaw: 0.2,
+            blind_turn_back_s: 10.0,
             blind_land_s: 30.0,
             low_battery_pct: 25,
             camera_timeout_s: 5.0,
@@ -204,6 +208,9 @@ pub struct Drone {
     /// The phase the link was lost in.
     lost_in: Option<Phase>,
     blind_since: Option<f64>,
+    /// The IMU heading at its last SLAM keyframe, radians: where the camera last saw enough
+    /// to build the map on.
+    keyframe_heading: Option<f64>,
     /// Since when the vehicle has reported itself disarmed while the station flew it.
     disarmed_since: Option<f64>,
     /// Mission time of its last camera frame (none yet: no camera is watched).
@@ -258,6 +265,7 @@ impl Drone {
             pending: None,
             lost_in: None,
             blind_since: None,
+            keyframe_heading: None,
             last_frame: None,
             disarmed_since: None,
             landing_since: None,
@@ -439,6 +447,21 @@ impl Drone {
             .map(|e| [e.position[0], e.position[1], e.position[2], e.attitude[2]])
     }
 
+    /// A SLAM pose of the body (position, heading) taken at `stamp`; `keyframe`: its frame
+    /// became a keyframe.
+    pub fn slam_fix(&mut self, stamp: f64, position: [f64; 3], yaw: f64, keyframe: bool) {
+        let used = matches!(
+            self.ekf.update_slam(stamp, position, yaw),
+            Update::Applied | Update::Corrected
+        );
+        if used
+            && keyframe
+            && let Some(heading) = self.link.telemetry().yaw_rad
+        {
+            self.keyframe_heading = Some(f64::from(heading));
+        }
+    }
+
     /// The filter's roll and pitch (radians): the attitude the vehicle reports, else what the
     /// sticks sent make of it.
     pub fn tilt(&self) -> [f64; 2] {
@@ -580,7 +603,12 @@ impl Drone {
             self.return_home(&format!("battery at {pct} %"));
         }
         let Some(pose) = self.pose() else {
-            return self.fly_blind(now, config, telemetry.height_m);
+            return self.fly_blind(
+                now,
+                config,
+                telemetry.height_m,
+                telemetry.yaw_rad.map(f64::from),
+            );
         };
         self.blind_since = None;
         self.tracking = false;
@@ -640,13 +668,14 @@ impl Drone {
     }
 
     /// No valid pose: hover level with altitude held (thesis Algorithm 7), climbing only to
-    /// finish a take-off, turning slowly so the camera sweeps back over known views; land after
-    /// too long.
+    /// finish a take-off, turning back to the heading of the last keyframe, then slowly round so the
+    /// camera sweeps over known views; land after too long.
     fn fly_blind(
         &mut self,
         now: f64,
         config: &DroneConfig,
         height: Option<f32>,
+        heading: Option<f64>,
     ) -> Option<DroneEvent> {
         let since = *self.blind_since.get_or_insert(now);
         if now - since > config.blind_land_s {
@@ -664,9 +693,20 @@ impl Drone {
             0.0
         };
         self.controller.reset();
+        // First back to the heading of the last keyframe (the camera lost the map turning away
+        // from it, mostly during a look around, to a far wall beyond its depth range), then a
+        // slow turn over every other view.
+        let yaw = match (self.keyframe_heading, heading) {
+            (Some(fixed), Some(heading)) if now - since < config.blind_turn_back_s => {
+                let off = wrap_angle(fixed - heading);
+                // Clockwise sticks are positive; full turn rate beyond 0.3 rad off.
+                -config.blind_yaw * (off / 0.3).clamp(-1.0, 1.0) as f32
+            }
+            _ => config.blind_yaw,
+        };
         self.set_sticks(Sticks {
             throttle: climb,
-            yaw: config.blind_yaw,
+            yaw,
             ..Sticks::CENTRED
         });
         None
@@ -786,6 +826,7 @@ mod tests {
         commands: Mutex<Vec<Command>>,
         disarmed: std::sync::atomic::AtomicBool,
         mode: Mutex<Option<String>>,
+        yaw: Mutex<Option<f32>>,
     }
 
     impl VehicleLink for StubbornVehicle {
@@ -809,6 +850,10 @@ mod tests {
                     .unwrap_or_else(std::sync::PoisonError::into_inner)
                     .clone(),
                 height_m: Some(0.9),
+                yaw_rad: *self
+                    .yaw
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner),
                 ..Telemetry::default()
             }
         }
@@ -897,6 +942,62 @@ mod tests {
             s.pitch > 0.0 && s.roll.abs() < 0.05 * s.pitch,
             "forward, to +x: {s:?}"
         );
+    }
+
+    #[test]
+    fn a_drone_that_loses_its_pose_turns_back_to_where_the_slam_last_saw_then_sweeps() {
+        let vehicle = Arc::new(StubbornVehicle::default());
+        let config = DroneConfig::default();
+        let mut drone = exploring_drone(vehicle.clone(), &config);
+        let set_yaw = |yaw: f64| *vehicle.yaw.lock().unwrap() = Some(yaw as f32);
+        // Keyframes facing +x, then a turn to the left (anticlockwise): fixes that make no
+        // keyframe up to 0.5 rad, then none.
+        let mut t = 0.0;
+        for _ in 0..20 {
+            t += 0.1;
+            set_yaw(0.0);
+            drone.slam_fix(t, [0.0, 0.0, 0.9], 0.0, true);
+            drone.tick(t, &config);
+        }
+        for i in 1..=10 {
+            t += 0.1;
+            let yaw = 0.1 * f64::from(i);
+            set_yaw(yaw);
+            if i <= 5 {
+                drone.slam_fix(t, [0.0, 0.0, 0.9], yaw, false);
+            }
+            drone.tick(t, &config);
+        }
+        while drone.pose().is_some() {
+            t += 0.1;
+            drone.tick(t, &config);
+            assert!(t < 30.0, "a pose without SLAM fixes must expire");
+        }
+        let blind = t;
+        // 1 rad left of the keyframes' heading: back clockwise (positive) at the full blind rate…
+        let s = drone.sticks.expect("sticks");
+        assert_eq!((s.roll, s.pitch, s.throttle), (0.0, 0.0, 0.0));
+        assert_eq!(s.yaw, config.blind_yaw, "{s:?}");
+        // …slower when nearly there, and the other way once past it.
+        for (yaw, clockwise) in [(0.1, true), (-0.1, false)] {
+            for _ in 0..10 {
+                t += 0.1;
+                set_yaw(yaw);
+                drone.tick(t, &config);
+            }
+            let s = drone.sticks.expect("sticks");
+            assert!(
+                s.yaw.abs() < config.blind_yaw && (s.yaw > 0.0) == clockwise,
+                "at {yaw} rad: {s:?}"
+            );
+        }
+        // It did not find the map there: the slow sweep.
+        while t < blind + config.blind_turn_back_s + 0.5 {
+            t += 0.1;
+            drone.tick(t, &config);
+        }
+        assert_eq!(drone.sticks.expect("sticks").yaw, config.blind_yaw);
+        assert_eq!(drone.phase, Phase::Exploring);
     }
 
     #[test]

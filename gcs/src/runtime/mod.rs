@@ -436,8 +436,7 @@ impl Mission {
                     if let Some(pose) = fix.map_from_body {
                         let v = pose.translation.vector;
                         let x = pose.rotation * nalgebra::Vector3::x();
-                        d.ekf
-                            .update_slam(fix.stamp, [v.x, v.y, v.z], x.y.atan2(x.x));
+                        d.slam_fix(fix.stamp, [v.x, v.y, v.z], x.y.atan2(x.x), fix.keyframe);
                     }
                 }
             }

@@ -115,6 +115,8 @@ pub struct SlamFix {
     pub stamp: f64,
     /// Body to map; `None` while lost (or not yet anchored in the map).
     pub map_from_body: Option<Isometry3<f64>>,
+    /// The frame became a keyframe: the camera saw enough to build the map on.
+    pub keyframe: bool,
 }
 
 /// The SLAM's state for displays.
@@ -310,6 +312,7 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
             drone: k,
             stamp: f.stamp,
             map_from_body: estimate.as_ref().and_then(RobotEstimate::map_from_body),
+            keyframe: report.keyframe.is_some(),
         });
         let processed = count.fetch_add(1, Ordering::Relaxed) + 1;
         let published = SlamView {
