@@ -209,8 +209,13 @@ pub struct Drone {
     lost_in: Option<Phase>,
     blind_since: Option<f64>,
     /// The IMU heading at its last SLAM keyframe, radians: where the camera last saw enough
-    /// to build the map on.
+    /// to build the map on…
     keyframe_heading: Option<f64>,
+    /// …and its heading in the map.
+    keyframe_yaw: Option<f64>,
+    /// Where the filter had the drone when the SLAM lost it (while the filter still carries
+    /// the pose).
+    lost_at: Option<[f64; 2]>,
     /// Since when the vehicle has reported itself disarmed while the station flew it.
     disarmed_since: Option<f64>,
     /// Mission time of its last camera frame (none yet: no camera is watched).
@@ -266,6 +271,8 @@ impl Drone {
             lost_in: None,
             blind_since: None,
             keyframe_heading: None,
+            keyframe_yaw: None,
+            lost_at: None,
             last_frame: None,
             disarmed_since: None,
             landing_since: None,
@@ -454,11 +461,19 @@ impl Drone {
             self.ekf.update_slam(stamp, position, yaw),
             Update::Applied | Update::Corrected
         );
-        if used
-            && keyframe
-            && let Some(heading) = self.link.telemetry().yaw_rad
-        {
-            self.keyframe_heading = Some(f64::from(heading));
+        if used {
+            self.lost_at = None;
+        }
+        if used && keyframe {
+            self.keyframe_yaw = Some(yaw);
+            self.keyframe_heading = self.link.telemetry().yaw_rad.map(f64::from);
+        }
+    }
+
+    /// The SLAM could not place a frame of this drone.
+    pub fn slam_lost(&mut self) {
+        if self.lost_at.is_none() {
+            self.lost_at = self.pose().map(|p| [p[0], p[1]]);
         }
     }
 
@@ -614,7 +629,21 @@ impl Drone {
         self.tracking = false;
         let here = [pose[0], pose[1]];
         let mut event = None;
+        let lost = self
+            .lost_at
+            .filter(|_| matches!(self.phase, Phase::Exploring | Phase::Returning));
+        if let Some(at) = lost {
+            // The SLAM lost it, the filter still carries the pose: stop where that happened
+            // (not on along the path, out of what the camera knew) and face where the last
+            // keyframe was taken, so the camera sees the map again.
+            self.hold = at;
+            if let Some(yaw) = self.keyframe_yaw {
+                self.yaw_goal = yaw;
+            }
+            self.progress = (now, here);
+        }
         match self.phase {
+            _ if lost.is_some() => {}
             Phase::TakingOff => {
                 if pose[2] > self.altitude - 0.1 {
                     // Airborne: look around once, so the first plan sees every side.
@@ -998,6 +1027,36 @@ mod tests {
         }
         assert_eq!(drone.sticks.expect("sticks").yaw, config.blind_yaw);
         assert_eq!(drone.phase, Phase::Exploring);
+    }
+
+    #[test]
+    fn a_drone_the_slam_loses_stops_where_it_was_lost_and_faces_its_last_keyframe() {
+        let vehicle = Arc::new(StubbornVehicle::default());
+        let config = DroneConfig::default();
+        let mut drone = exploring_drone(vehicle.clone(), &config);
+        // Following a path east: keyframes facing north-east, then a fix facing east.
+        drone.set_plan(Some([5.0, 0.0]), vec![[0.0, 0.0], [5.0, 0.0]], 0.0);
+        drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.5, true);
+        drone.slam_fix(0.2, [0.1, 0.0, 0.9], 0.0, false);
+        drone.tick(0.2, &config);
+        assert!(drone.sticks.expect("sticks").pitch > 0.0, "on its way");
+        let where_lost = drone.pose().expect("pose");
+        drone.slam_lost();
+        // The filter still carries the pose: hold it where the SLAM lost it, facing the last
+        // keyframe's way, the goal kept.
+        let mut t = 0.2;
+        while t < 1.0 {
+            t += 0.1;
+            drone.tick(t, &config);
+        }
+        assert!(drone.pose().is_some(), "still a pose to fly on");
+        assert_eq!(drone.hold, [where_lost[0], where_lost[1]]);
+        assert_eq!(drone.yaw_goal, 0.5);
+        assert_eq!(drone.goal, Some([5.0, 0.0]));
+        // Found again: on along the path.
+        drone.slam_fix(t, [0.1, 0.0, 0.9], 0.0, false);
+        drone.tick(t + 0.1, &config);
+        assert!(drone.hold[0] > where_lost[0] + 0.1, "{:?}", drone.hold);
     }
 
     #[test]

@@ -437,6 +437,8 @@ impl Mission {
                         let v = pose.translation.vector;
                         let x = pose.rotation * nalgebra::Vector3::x();
                         d.slam_fix(fix.stamp, [v.x, v.y, v.z], x.y.atan2(x.x), fix.keyframe);
+                    } else {
+                        d.slam_lost();
                     }
                 }
             }
