@@ -218,7 +218,8 @@ pub enum Record {
 }
 
 enum Message {
-    Record(Record),
+    /// Boxed: the queue holds hundreds, most far smaller than the largest record.
+    Record(Box<Record>),
     Finish,
 }
 
@@ -308,7 +309,7 @@ impl Recorder {
         {
             return;
         }
-        if let Err(TrySendError::Full(_)) = self.tx.try_send(Message::Record(record)) {
+        if let Err(TrySendError::Full(_)) = self.tx.try_send(Message::Record(Box::new(record))) {
             self.inner.dropped.fetch_add(1, Ordering::Relaxed);
         }
     }

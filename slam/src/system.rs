@@ -1102,7 +1102,8 @@ impl Slam {
                         a.to_degrees()
                     );
                     found = None;
-                } else if let Some(off) = self.implausible(frame, &(base * reg.reference_from_frame))
+                } else if let Some(off) =
+                    self.implausible(frame, &(base * reg.reference_from_frame))
                 {
                     why = format!("registration {off}: rejected");
                     found = None;

@@ -406,14 +406,19 @@ fn on_a_vehicle_registrations_off_its_measured_height_are_refused() {
         f.fly(&[vec![[x, y, 1.0, yaw], [x, y, 1.0, yaw + 0.8]]], 15.0);
         f
     };
-    let good = run(0.0);
+    assert_refused_only_when_off(&run(0.0), &run(0.6), "off the predicted height");
+}
+
+/// `good` (a flight whose sensors tell the truth) lost at most 1 frame in 20; `off` (the same
+/// flight, one sensor off) had every frame but perhaps its first refused, for `why`.
+fn assert_refused_only_when_off(good: &Flight, off: &Flight, why: &str) {
     assert!(
         good.lost[0] * 20 <= good.frames[0],
-        "{} of {} lost",
+        "{} of {} lost: {:?}",
         good.lost[0],
-        good.frames[0]
+        good.frames[0],
+        &good.lost_why[..good.lost_why.len().min(3)]
     );
-    let off = run(0.6);
     assert!(
         off.lost[0] + 1 >= off.frames[0],
         "{} of {} lost",
@@ -421,9 +426,7 @@ fn on_a_vehicle_registrations_off_its_measured_height_are_refused() {
         off.frames[0]
     );
     assert!(
-        off.lost_why
-            .iter()
-            .any(|w| w.contains("off the predicted height")),
+        off.lost_why.iter().any(|w| w.contains(why)),
         "{:?}",
         &off.lost_why[..off.lost_why.len().min(3)]
     );
@@ -449,27 +452,10 @@ fn registrations_that_contradict_the_imus_gravity_are_refused() {
         );
         f
     };
-    let good = run(0.0);
-    assert!(
-        good.lost[0] * 20 <= good.frames[0],
-        "{} of {} lost: {:?}",
-        good.lost[0],
-        good.frames[0],
-        &good.lost_why[..good.lost_why.len().min(3)]
-    );
-    let off = run(15f64.to_radians());
-    assert!(
-        off.lost[0] + 1 >= off.frames[0],
-        "{} of {} lost",
-        off.lost[0],
-        off.frames[0]
-    );
-    assert!(
-        off.lost_why
-            .iter()
-            .any(|w| w.contains("from the IMU's gravity")),
-        "{:?}",
-        &off.lost_why[..off.lost_why.len().min(3)]
+    assert_refused_only_when_off(
+        &run(0.0),
+        &run(15f64.to_radians()),
+        "from the IMU's gravity",
     );
 }
 
