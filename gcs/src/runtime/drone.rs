@@ -697,8 +697,8 @@ impl Drone {
     }
 
     /// No valid pose: hover level with altitude held (thesis Algorithm 7), climbing only to
-    /// finish a take-off, turning back to the heading of the last keyframe, then slowly round so the
-    /// camera sweeps over known views; land after too long.
+    /// finish a take-off, turning back to the heading of the last keyframe, then slowly round
+    /// so the camera sweeps over known views; land after too long.
     fn fly_blind(
         &mut self,
         now: f64,
