@@ -471,7 +471,7 @@ fn watch(
             );
             writeln!(
                 f,
-                "time_s,drone,phase,slam,true_x,true_y,true_z,true_yaw,flown_x,flown_y,flown_z,flown_yaw,sigma_m,slam_t,slam_x,slam_y"
+                "time_s,drone,phase,slam,true_x,true_y,true_z,true_yaw,flown_x,flown_y,flown_z,flown_yaw,sigma_m,slam_t,slam_x,slam_y,setpoint_x,setpoint_y,roll,pitch,yaw_rate"
             )?;
             Some(f)
         }
@@ -505,9 +505,13 @@ fn watch(
                                     format!("{t:.2},{:.3},{:.3}", v.x, v.y)
                                 },
                             );
+                        let sticks = d.sticks.map_or_else(
+                            || ",,".to_owned(),
+                            |c| format!("{:.3},{:.3},{:.3}", c.roll, c.pitch, c.yaw),
+                        );
                         writeln!(
                             f,
-                            "{now:.2},{},{},{},{:.3},{:.3},{:.3},{:.4},{flown},{:.3},{slam}",
+                            "{now:.2},{},{},{},{:.3},{:.3},{:.3},{:.4},{flown},{:.3},{slam},{:.3},{:.3},{sticks}",
                             k + 1,
                             d.phase.name(),
                             d.slam.name(),
@@ -515,7 +519,9 @@ fn watch(
                             p[1],
                             p[2],
                             p[3],
-                            d.pose_sigma
+                            d.pose_sigma,
+                            d.setpoint[0],
+                            d.setpoint[1],
                         )
                     }
                 {

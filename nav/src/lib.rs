@@ -3,6 +3,7 @@
 //! planner step that ties them together (thesis §4.4, Algorithms 1–7).
 
 pub mod assignment;
+pub mod avoid;
 pub mod blacklist;
 pub mod clearance;
 pub mod control;

@@ -593,6 +593,7 @@ mod tests {
             goal: Some([4.0, 3.0]),
             path: vec![[1.0, 2.0], [2.5, 2.5], [4.0, 3.0]],
             trajectory: Trail::from_points([[0.5, 2.0], [1.0, 2.0]]),
+            setpoint: [1.2, 2.1],
             height_goal: 0.9,
             yaw_goal: 0.5,
             sticks: None,

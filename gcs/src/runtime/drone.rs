@@ -6,6 +6,8 @@ use std::sync::Arc;
 use std::sync::mpsc::{Receiver, TryRecvError, channel};
 
 use link::{Command, CommandError, FlightMode, LinkState, Sticks, VehicleLink};
+use nav::Grid;
+use nav::avoid::keep_clear;
 use nav::control::{PidGains, Pose3, PositionController, PositionGains};
 use nav::local::{Follow, FollowerConfig, PathFollower, Pose2, wrap_angle};
 use slam::ekf::{Ekf, EkfConfig, Input, Update};
@@ -93,12 +95,20 @@ pub struct DroneConfig {
     /// Holding still (a look around, a turn, a hover), an error under this is left to the
     /// autopilot's own position hold instead of chasing the pose estimate's noise, metres.
     pub hold_band_m: f64,
+    /// The position setpoint never leads toward a wall of the map nearer than this to the
+    /// drone's centre, and leads back out to it ([`nav::avoid::keep_clear`]), metres.
+    pub wall_clearance_m: f64,
     /// Seconds without 0.3 m of progress toward a goal before it is given up.
     pub stuck_s: f64,
     /// A look around on the spot takes this long, seconds.
     pub scan_s: f64,
     /// Yaw stick while hovering without a pose (a slow turn so the camera finds known views).
     pub blind_yaw: f32,
+    /// A drone the SLAM loses goes back to where its last keyframe was taken, facing the way it
+    /// faced then, if that is within this distance (the camera sees what the keyframe saw;
+    /// where it was lost it may be too near a wall, or see only what is beyond the depth's
+    /// range), else it stops where it was lost, metres.
+    pub lost_back_m: f64,
     /// Without a pose, turn back to the heading of the last SLAM keyframe for this long first,
     /// seconds.
     pub blind_turn_back_s: f64,
@@ -150,9 +160,13 @@ impl Default for DroneConfig {
             },
             ekf: EkfConfig::default(),
             hold_band_m: 0.1,
+            // The simulated drone's radius (0.2 m) and 15 cm: a door 0.7 m wide still lets it
+            // through its middle untouched.
+            wall_clearance_m: 0.35,
             stuck_s: 15.0,
             scan_s: 10.0,
             blind_yaw: 0.2,
+            lost_back_m: 1.0,
             blind_turn_back_s: 10.0,
             blind_land_s: 30.0,
             low_battery_pct: 25,
@@ -199,6 +213,12 @@ pub struct Drone {
     hold: [f64; 2],
     /// Pursuing a carrot along a path this tick (not holding still).
     tracking: bool,
+    /// Turning on the spot toward the path (holding where the turn began).
+    turning: bool,
+    /// Where the position controller pulled it last: `hold` kept off the walls.
+    setpoint: [f64; 2],
+    /// The latest occupancy map, whose walls it keeps off.
+    map: Option<Arc<Grid>>,
     /// Heading held, radians.
     pub yaw_goal: f64,
     /// Height held, metres.
@@ -211,8 +231,10 @@ pub struct Drone {
     /// The IMU heading at its last SLAM keyframe, radians: where the camera last saw enough
     /// to build the map on…
     keyframe_heading: Option<f64>,
-    /// …and its heading in the map.
+    /// …its heading in the map…
     keyframe_yaw: Option<f64>,
+    /// …and where it was taken (x, y, map frame).
+    keyframe_at: Option<[f64; 2]>,
     /// Where the filter had the drone when the SLAM lost it (while the filter still carries
     /// the pose).
     lost_at: Option<[f64; 2]>,
@@ -265,6 +287,9 @@ impl Drone {
             scan: None,
             hold: [x, y],
             tracking: false,
+            turning: false,
+            setpoint: [x, y],
+            map: None,
             yaw_goal: yaw,
             height_goal: spec.altitude,
             pending: None,
@@ -272,6 +297,7 @@ impl Drone {
             blind_since: None,
             keyframe_heading: None,
             keyframe_yaw: None,
+            keyframe_at: None,
             lost_at: None,
             last_frame: None,
             disarmed_since: None,
@@ -287,6 +313,16 @@ impl Drone {
     /// The path it is following.
     pub fn path(&self) -> &[[f64; 2]] {
         self.follower.path()
+    }
+
+    /// Where the position controller pulls it (x, y), map frame.
+    pub fn setpoint(&self) -> [f64; 2] {
+        self.setpoint
+    }
+
+    /// A new occupancy map: the walls to keep `wall_clearance_m` off.
+    pub fn set_map(&mut self, map: Arc<Grid>) {
+        self.map = Some(map);
     }
 
     /// Takes the operator messages produced since the last call.
@@ -466,15 +502,21 @@ impl Drone {
         }
         if used && keyframe {
             self.keyframe_yaw = Some(yaw);
+            self.keyframe_at = Some([position[0], position[1]]);
             self.keyframe_heading = self.link.telemetry().yaw_rad.map(f64::from);
         }
     }
 
-    /// The SLAM could not place a frame of this drone.
-    pub fn slam_lost(&mut self) {
-        if self.lost_at.is_none() {
-            self.lost_at = self.pose().map(|p| [p[0], p[1]]);
+    /// The SLAM could not place a frame of this drone: it goes back to where its last keyframe
+    /// was taken, if that is within `config.lost_back_m`, else it stops where it is.
+    pub fn slam_lost(&mut self, config: &DroneConfig) {
+        if self.lost_at.is_some() {
+            return;
         }
+        self.lost_at = self.pose().map(|p| match self.keyframe_at {
+            Some(k) if (k[0] - p[0]).hypot(k[1] - p[1]) <= config.lost_back_m => k,
+            _ => [p[0], p[1]],
+        });
     }
 
     /// The filter's roll and pitch (radians): the attitude the vehicle reports, else what the
@@ -669,9 +711,13 @@ impl Drone {
             Phase::Holding => {}
             _ => return None,
         }
+        self.setpoint = match &self.map {
+            Some(map) => keep_clear(map, here, self.hold, config.wall_clearance_m),
+            None => self.hold,
+        };
         let setpoint = Pose3 {
-            x: self.hold[0],
-            y: self.hold[1],
+            x: self.setpoint[0],
+            y: self.setpoint[1],
             z: self.height_goal,
             yaw: self.yaw_goal,
         };
@@ -682,7 +728,9 @@ impl Drone {
             yaw: pose[3],
         };
         let mut c = self.controller.update(&setpoint, &estimate, dt);
+        // Near a wall the controller flies even a small error: its derivative term brakes.
         if !self.tracking
+            && self.setpoint == self.hold
             && (setpoint.x - estimate.x).hypot(setpoint.y - estimate.y) < config.hold_band_m
         {
             (c.roll, c.pitch) = (0.0, 0.0);
@@ -749,15 +797,21 @@ impl Drone {
         }));
         match f {
             Follow::Turn { at, yaw } => {
-                self.hold = at;
+                // Hold where the turn began: a spot that slid along the path with the drone
+                // would let it coast on through the turn (into a door's jamb).
+                if !self.turning {
+                    self.hold = at;
+                }
+                self.turning = true;
                 self.yaw_goal = yaw;
             }
             Follow::Track { carrot, yaw } => {
                 self.tracking = true;
+                self.turning = false;
                 self.hold = carrot;
                 self.yaw_goal = yaw;
             }
-            Follow::Hover | Follow::Arrived => {}
+            Follow::Hover | Follow::Arrived => self.turning = false,
         }
         f
     }
@@ -974,6 +1028,68 @@ mod tests {
     }
 
     #[test]
+    fn a_drone_is_never_steered_toward_a_wall_of_the_map_within_its_clearance() {
+        let config = DroneConfig::default();
+        // Looking around at (0, 0) facing +x, its hold 0.5 m ahead; a wall's face 0.3 m ahead.
+        let scanning = |map: Option<Grid>| {
+            let mut drone = exploring_drone(Arc::default(), &config);
+            drone.scan = Some(Scan {
+                since: 0.0,
+                yaw0: 0.0,
+                give_up: None,
+            });
+            drone.hold = [0.5, 0.0];
+            if let Some(map) = map {
+                drone.set_map(Arc::new(map));
+            }
+            drone.tick(0.1, &config);
+            (drone.sticks.expect("sticks"), drone.setpoint())
+        };
+        let (open, _) = scanning(None);
+        assert!(open.pitch > 0.0, "no map: toward the hold, {open:?}");
+        let mut map = Grid::new(40, 40, 0.05, [-1.0, -1.0], nav::Cell::Free);
+        for y in 0..40 {
+            map.set((26, y), nav::Cell::Occupied); // x = 0.30–0.35 m
+        }
+        let (walled, setpoint) = scanning(Some(map));
+        assert!(walled.pitch < 0.0, "led back from the wall: {walled:?}");
+        assert!(
+            setpoint[0] < 0.0 && setpoint[0] > -0.1,
+            "out to {} m from the wall: {setpoint:?}",
+            config.wall_clearance_m
+        );
+    }
+
+    #[test]
+    fn a_drone_turning_toward_its_path_holds_where_the_turn_began() {
+        let config = DroneConfig::default();
+        let mut drone = exploring_drone(Arc::default(), &config);
+        // Facing +x, the path north: a turn on the spot.
+        drone.set_plan(Some([0.0, 3.0]), vec![[0.0, 0.0], [0.0, 3.0]], 0.0);
+        drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.0, false);
+        drone.tick(0.1, &config);
+        assert_eq!(drone.hold, [0.0, 0.0]);
+        // Coasting north along the path while it turns: held back, not carried along.
+        drone.slam_fix(0.2, [0.0, 0.3, 0.9], 0.3, false);
+        drone.tick(0.2, &config);
+        assert_eq!(
+            drone.hold,
+            [0.0, 0.0],
+            "the turn's hold slid with the drone"
+        );
+        let s = drone.sticks.expect("sticks");
+        // South is to the right of a drone facing 0.3 rad: roll right, and back.
+        assert!(
+            s.roll > 0.0 && s.pitch < 0.0,
+            "back to where the turn began: {s:?}"
+        );
+        // Turned: on along the path, the carrot ahead of the drone.
+        drone.slam_fix(0.3, [0.0, 0.3, 0.9], std::f64::consts::FRAC_PI_2, false);
+        drone.tick(0.3, &config);
+        assert!(drone.hold[1] > 0.5, "{:?}", drone.hold);
+    }
+
+    #[test]
     fn a_drone_that_loses_its_pose_turns_back_to_where_the_slam_last_saw_then_sweeps() {
         let vehicle = Arc::new(StubbornVehicle::default());
         let config = DroneConfig::default();
@@ -1030,33 +1146,42 @@ mod tests {
     }
 
     #[test]
-    fn a_drone_the_slam_loses_stops_where_it_was_lost_and_faces_its_last_keyframe() {
-        let vehicle = Arc::new(StubbornVehicle::default());
+    fn a_drone_the_slam_loses_goes_back_to_its_last_keyframe_facing_its_way() {
         let config = DroneConfig::default();
-        let mut drone = exploring_drone(vehicle.clone(), &config);
-        // Following a path east: keyframes facing north-east, then a fix facing east.
-        drone.set_plan(Some([5.0, 0.0]), vec![[0.0, 0.0], [5.0, 0.0]], 0.0);
-        drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.5, true);
-        drone.slam_fix(0.2, [0.1, 0.0, 0.9], 0.0, false);
-        drone.tick(0.2, &config);
-        assert!(drone.sticks.expect("sticks").pitch > 0.0, "on its way");
-        let where_lost = drone.pose().expect("pose");
-        drone.slam_lost();
-        // The filter still carries the pose: hold it where the SLAM lost it, facing the last
-        // keyframe's way, the goal kept.
-        let mut t = 0.2;
-        while t < 1.0 {
-            t += 0.1;
-            drone.tick(t, &config);
-        }
-        assert!(drone.pose().is_some(), "still a pose to fly on");
-        assert_eq!(drone.hold, [where_lost[0], where_lost[1]]);
-        assert_eq!(drone.yaw_goal, 0.5);
-        assert_eq!(drone.goal, Some([5.0, 0.0]));
+        // Following a path east: a keyframe at `keyframe_x` facing north-east, then a fix at
+        // x = 0.1 facing east; there the SLAM loses it.
+        let lost_after_keyframe_at = |keyframe_x: f64| {
+            let mut drone = exploring_drone(Arc::default(), &config);
+            drone.set_plan(Some([5.0, 0.0]), vec![[0.0, 0.0], [5.0, 0.0]], 0.0);
+            drone.slam_fix(0.1, [keyframe_x, 0.0, 0.9], 0.5, true);
+            drone.slam_fix(0.2, [0.1, 0.0, 0.9], 0.0, false);
+            drone.tick(0.2, &config);
+            assert!(drone.sticks.expect("sticks").pitch > 0.0, "on its way");
+            let where_lost = drone.pose().expect("pose");
+            drone.slam_lost(&config);
+            // The filter still carries the pose: hold, facing the last keyframe's way, the
+            // goal kept.
+            let mut t = 0.2;
+            while t < 1.0 {
+                t += 0.1;
+                drone.tick(t, &config);
+            }
+            assert!(drone.pose().is_some(), "still a pose to fly on");
+            assert_eq!(drone.yaw_goal, 0.5);
+            assert_eq!(drone.goal, Some([5.0, 0.0]));
+            (drone, where_lost, t)
+        };
+        // The keyframe 0.1 m back: back there.
+        let (mut drone, where_lost, t) = lost_after_keyframe_at(0.0);
+        assert_eq!(drone.hold, [0.0, 0.0]);
         // Found again: on along the path.
         drone.slam_fix(t, [0.1, 0.0, 0.9], 0.0, false);
         drone.tick(t + 0.1, &config);
         assert!(drone.hold[0] > where_lost[0] + 0.1, "{:?}", drone.hold);
+        // The keyframe further back than `lost_back_m`: where the SLAM lost it.
+        let (drone, where_lost, _) = lost_after_keyframe_at(0.1 - config.lost_back_m - 0.2);
+        assert!(where_lost[0] > 0.0, "lost at the last fix: {where_lost:?}");
+        assert_eq!(drone.hold, [where_lost[0], where_lost[1]]);
     }
 
     #[test]

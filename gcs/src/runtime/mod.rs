@@ -198,6 +198,8 @@ pub struct DroneView {
     pub path: Vec<[f64; 2]>,
     /// Where it has been (x, y), decimated.
     pub trajectory: Trail,
+    /// Where the position controller pulls it (x, y), map frame.
+    pub setpoint: [f64; 2],
     /// Goal height, metres.
     pub height_goal: f64,
     /// Goal yaw, radians.
@@ -438,7 +440,7 @@ impl Mission {
                         let x = pose.rotation * nalgebra::Vector3::x();
                         d.slam_fix(fix.stamp, [v.x, v.y, v.z], x.y.atan2(x.x), fix.keyframe);
                     } else {
-                        d.slam_lost();
+                        d.slam_lost(&self.config.drone);
                     }
                 }
             }
@@ -724,6 +726,11 @@ impl Mission {
         if let Some(p) = &self.perception {
             self.grid = p.map().project().map(Arc::new);
         }
+        if let Some(grid) = &self.grid {
+            for d in &mut self.drones {
+                d.set_map(grid.clone());
+            }
+        }
     }
 
     fn plan(&mut self, now: f64) {
@@ -903,6 +910,7 @@ impl Mission {
                 goal: d.goal,
                 path: d.path().to_vec(),
                 trajectory: self.trajectories[k].clone(),
+                setpoint: d.setpoint(),
                 height_goal: d.height_goal,
                 yaw_goal: d.yaw_goal,
                 sticks: d.sticks,
