@@ -7,7 +7,7 @@ use std::sync::mpsc::{Receiver, TryRecvError, channel};
 
 use link::{Command, CommandError, FlightMode, LinkState, Sticks, VehicleLink};
 use nav::Grid;
-use nav::avoid::keep_clear;
+use nav::avoid::{KeepClear, keep_clear};
 use nav::control::{PidGains, Pose3, PositionController, PositionGains};
 use nav::local::{Follow, FollowerConfig, PathFollower, Pose2, wrap_angle};
 use slam::ekf::{Ekf, EkfConfig, Input, Update};
@@ -95,9 +95,10 @@ pub struct DroneConfig {
     /// Holding still (a look around, a turn, a hover), an error under this is left to the
     /// autopilot's own position hold instead of chasing the pose estimate's noise, metres.
     pub hold_band_m: f64,
-    /// The position setpoint never leads toward a wall of the map nearer than this to the
-    /// drone's centre, and leads back out to it ([`nav::avoid::keep_clear`]), metres.
-    pub wall_clearance_m: f64,
+    /// The position setpoint never leads toward a wall of the map nearer than the clearance to
+    /// the drone's centre, leads back out to it, and leads less far near walls
+    /// ([`nav::avoid::keep_clear`]).
+    pub keep_clear: KeepClear,
     /// Seconds without 0.3 m of progress toward a goal before it is given up.
     pub stuck_s: f64,
     /// A look around on the spot takes this long, seconds.
@@ -160,9 +161,7 @@ impl Default for DroneConfig {
             },
             ekf: EkfConfig::default(),
             hold_band_m: 0.1,
-            // The simulated drone's radius (0.2 m) and 15 cm: a door 0.7 m wide still lets it
-            // through its middle untouched.
-            wall_clearance_m: 0.35,
+            keep_clear: KeepClear::default(),
             stuck_s: 15.0,
             scan_s: 10.0,
             blind_yaw: 0.2,
@@ -320,7 +319,7 @@ impl Drone {
         self.setpoint
     }
 
-    /// A new occupancy map: the walls to keep `wall_clearance_m` off.
+    /// A new occupancy map: the walls to keep off ([`DroneConfig::keep_clear`]).
     pub fn set_map(&mut self, map: Arc<Grid>) {
         self.map = Some(map);
     }
@@ -712,7 +711,7 @@ impl Drone {
             _ => return None,
         }
         self.setpoint = match &self.map {
-            Some(map) => keep_clear(map, here, self.hold, config.wall_clearance_m),
+            Some(map) => keep_clear(map, here, self.hold, &config.keep_clear),
             None => self.hold,
         };
         let setpoint = Pose3 {
@@ -1056,7 +1055,7 @@ mod tests {
         assert!(
             setpoint[0] < 0.0 && setpoint[0] > -0.1,
             "out to {} m from the wall: {setpoint:?}",
-            config.wall_clearance_m
+            config.keep_clear.clearance_m
         );
     }
 
