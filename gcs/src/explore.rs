@@ -471,7 +471,7 @@ fn watch(
             );
             writeln!(
                 f,
-                "time_s,drone,phase,slam,true_x,true_y,true_z,true_yaw,flown_x,flown_y,flown_z,flown_yaw,sigma_m,slam_t,slam_x,slam_y,setpoint_x,setpoint_y,roll,pitch,yaw_rate"
+                "time_s,drone,phase,slam,true_x,true_y,true_z,true_yaw,flown_x,flown_y,flown_z,flown_yaw,sigma_m,slam_t,slam_x,slam_y,setpoint_x,setpoint_y,roll,pitch,yaw_rate,inliers"
             )?;
             Some(f)
         }
@@ -511,7 +511,7 @@ fn watch(
                         );
                         writeln!(
                             f,
-                            "{now:.2},{},{},{},{:.3},{:.3},{:.3},{:.4},{flown},{:.3},{slam},{:.3},{:.3},{sticks}",
+                            "{now:.2},{},{},{},{:.3},{:.3},{:.3},{:.4},{flown},{:.3},{slam},{:.3},{:.3},{sticks},{}",
                             k + 1,
                             d.phase.name(),
                             d.slam.name(),
@@ -522,6 +522,7 @@ fn watch(
                             d.pose_sigma,
                             d.setpoint[0],
                             d.setpoint[1],
+                            d.inliers.map_or_else(String::new, |n| n.to_string()),
                         )
                     }
                 {

@@ -594,6 +594,7 @@ mod tests {
             path: vec![[1.0, 2.0], [2.5, 2.5], [4.0, 3.0]],
             trajectory: Trail::from_points([[0.5, 2.0], [1.0, 2.0]]),
             setpoint: [1.2, 2.1],
+            inliers: Some(120),
             height_goal: 0.9,
             yaw_goal: 0.5,
             sticks: None,

@@ -184,6 +184,9 @@ struct Scan {
     yaw0: f64,
     /// The goal to give up after it (reached while its frontier stayed).
     give_up: Option<[f64; 2]>,
+    /// The SLAM lost the drone during it: turning on would lose it again where it did (a
+    /// door close ahead, the room behind beyond the depth's range), so it ends once found.
+    cut: bool,
 }
 
 /// A drone in the mission.
@@ -197,6 +200,8 @@ pub struct Drone {
     start_sequence: StartSequence,
     /// Its altitude band, metres.
     pub altitude: f64,
+    /// Inliers of its last frame the SLAM tracked (`None`: relocalised or lost).
+    pub inliers: Option<usize>,
     /// Where it started (x, y, yaw), if known.
     pub start: Option<[f64; 3]>,
     /// What it is doing.
@@ -275,6 +280,7 @@ impl Drone {
             name: spec.name,
             link: spec.link,
             start_sequence: spec.start_sequence,
+            inliers: None,
             altitude: spec.altitude,
             start: spec.start,
             phase: Phase::Idle,
@@ -507,8 +513,12 @@ impl Drone {
     }
 
     /// The SLAM could not place a frame of this drone: it goes back to where its last keyframe
-    /// was taken, if that is within `config.lost_back_m`, else it stops where it is.
+    /// was taken, if that is within `config.lost_back_m`, else it stops where it is; a look
+    /// around it was flying ends once it is found again.
     pub fn slam_lost(&mut self, config: &DroneConfig) {
+        if let Some(scan) = &mut self.scan {
+            scan.cut = true;
+        }
         if self.lost_at.is_some() {
             return;
         }
@@ -693,6 +703,7 @@ impl Drone {
                         since: now,
                         yaw0: pose[3],
                         give_up: None,
+                        cut: false,
                     });
                     self.progress = (now, here);
                 }
@@ -828,10 +839,16 @@ impl Drone {
         if let Some(scan) = self.scan {
             // A full turn on the spot (36°/s), then the goal (if any) is given up.
             let t = now - scan.since;
-            if t < config.scan_s {
+            if t < config.scan_s && !scan.cut {
                 self.yaw_goal = scan.yaw0 + t * std::f64::consts::TAU / config.scan_s;
                 self.progress = (now, here);
                 return None;
+            }
+            if scan.cut {
+                tracing::info!(
+                    drone = self.id + 1,
+                    "the look around lost the map: it ends where the map was found again"
+                );
             }
             self.scan = None;
             return scan.give_up.map(DroneEvent::GiveUp);
@@ -842,6 +859,7 @@ impl Drone {
                 since: now,
                 yaw0: pose[3],
                 give_up: self.goal.take(),
+                cut: false,
             });
             self.hold = here;
             return None;
@@ -1011,6 +1029,7 @@ mod tests {
             since: 0.0,
             yaw0: 0.0,
             give_up: None,
+            cut: false,
         });
         drone.hold = [0.6 * config.hold_band_m, 0.0];
         drone.tick(0.1, &config);
@@ -1036,6 +1055,7 @@ mod tests {
                 since: 0.0,
                 yaw0: 0.0,
                 give_up: None,
+                cut: false,
             });
             drone.hold = [0.5, 0.0];
             if let Some(map) = map {
@@ -1181,6 +1201,46 @@ mod tests {
         let (drone, where_lost, _) = lost_after_keyframe_at(0.1 - config.lost_back_m - 0.2);
         assert!(where_lost[0] > 0.0, "lost at the last fix: {where_lost:?}");
         assert_eq!(drone.hold, [where_lost[0], where_lost[1]]);
+    }
+
+    #[test]
+    fn a_look_around_that_loses_the_map_ends_where_the_map_is_found_again() {
+        let config = DroneConfig::default();
+        let mut drone = exploring_drone(Arc::default(), &config);
+        drone.scan = Some(Scan {
+            since: 0.0,
+            yaw0: 0.0,
+            give_up: Some([1.0, 0.0]),
+            cut: false,
+        });
+        let mut t = 0.0;
+        let mut yaw = 0.0;
+        // Turning, a keyframe now and then, for 2 s.
+        while t < 2.0 {
+            t += 0.1;
+            yaw += 0.06;
+            drone.slam_fix(t, [0.0, 0.0, 0.9], yaw, true);
+            assert_eq!(drone.tick(t, &config), None);
+        }
+        assert!(drone.yaw_goal > 1.0, "turning: {}", drone.yaw_goal);
+        // Lost: it turns back to the last keyframe's heading, not on with the look around…
+        drone.slam_lost(&config);
+        for _ in 0..5 {
+            t += 0.1;
+            assert_eq!(drone.tick(t, &config), None);
+            assert_eq!(drone.yaw_goal, yaw);
+        }
+        // …and once found again, the look around is over (its goal given up), long before
+        // its full turn's time.
+        let mut event = None;
+        while event.is_none() {
+            t += 0.1;
+            drone.slam_fix(t, [0.0, 0.0, 0.9], yaw, false);
+            event = drone.tick(t, &config);
+            assert!(t < config.scan_s, "the look around went on");
+        }
+        assert_eq!(event, Some(DroneEvent::GiveUp([1.0, 0.0])));
+        assert!(drone.scan.is_none());
     }
 
     #[test]

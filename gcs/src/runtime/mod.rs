@@ -200,6 +200,8 @@ pub struct DroneView {
     pub trajectory: Trail,
     /// Where the position controller pulls it (x, y), map frame.
     pub setpoint: [f64; 2],
+    /// Inliers of its last frame the SLAM tracked (`None`: relocalised or lost).
+    pub inliers: Option<usize>,
     /// Goal height, metres.
     pub height_goal: f64,
     /// Goal yaw, radians.
@@ -435,6 +437,7 @@ impl Mission {
                         continue;
                     };
                     d.camera_frame(now);
+                    d.inliers = fix.inliers;
                     if let Some(pose) = fix.map_from_body {
                         let v = pose.translation.vector;
                         let x = pose.rotation * nalgebra::Vector3::x();
@@ -911,6 +914,7 @@ impl Mission {
                 path: d.path().to_vec(),
                 trajectory: self.trajectories[k].clone(),
                 setpoint: d.setpoint(),
+                inliers: d.inliers,
                 height_goal: d.height_goal,
                 yaw_goal: d.yaw_goal,
                 sticks: d.sticks,

@@ -117,6 +117,9 @@ pub struct SlamFix {
     pub map_from_body: Option<Isometry3<f64>>,
     /// The frame became a keyframe: the camera saw enough to build the map on.
     pub keyframe: bool,
+    /// Matches that agreed with the frame's pose when it was tracked (how much of the map the
+    /// camera sees: few, and the next frame may be lost); `None` when relocalised or lost.
+    pub inliers: Option<usize>,
 }
 
 /// The SLAM's state for displays.
@@ -313,6 +316,10 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
             stamp: f.stamp,
             map_from_body: estimate.as_ref().and_then(RobotEstimate::map_from_body),
             keyframe: report.keyframe.is_some(),
+            inliers: match report.tracking {
+                Tracking::Tracked { inliers } => Some(inliers),
+                _ => None,
+            },
         });
         let processed = count.fetch_add(1, Ordering::Relaxed) + 1;
         let published = SlamView {
