@@ -27,10 +27,20 @@ fn text(o: &Output) -> String {
     )
 }
 
-fn temp_keys() -> PathBuf {
+/// A scratch directory, removed when dropped.
+struct Scratch(PathBuf);
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn temp_keys() -> (Scratch, PathBuf) {
     let dir = std::env::temp_dir().join(format!("gcs-key-cli-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    dir.join("keys")
+    let keys = dir.join("keys");
+    (Scratch(dir), keys)
 }
 
 fn link(address: &str, signing: Option<SigningKey>) -> MavlinkLink {
@@ -51,7 +61,7 @@ fn armed(sitl: &Sitl) -> bool {
 
 #[test]
 fn a_key_given_with_setup_signing_lets_only_its_holder_command_the_vehicle() {
-    let keys = temp_keys();
+    let (_scratch, keys) = temp_keys();
     let made = gcs_key(&keys, &["new", "alpha"]);
     assert!(made.status.success(), "{}", text(&made));
     assert!(text(&made).contains("alpha.key"), "{}", text(&made));

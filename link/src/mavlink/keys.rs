@@ -267,15 +267,25 @@ pub fn disable_signing(target_system: u8) -> MavMessage {
 mod tests {
     use super::*;
 
-    fn temp_store(tag: &str) -> KeyStore {
+    /// A scratch directory, removed when dropped.
+    struct Scratch(std::path::PathBuf);
+
+    impl Drop for Scratch {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+
+    fn temp_store(tag: &str) -> (Scratch, KeyStore) {
         let dir = std::env::temp_dir().join(format!("gcs-keys-{tag}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
-        KeyStore::at(dir.join("keys"))
+        let store = KeyStore::at(dir.join("keys"));
+        (Scratch(dir), store)
     }
 
     #[test]
     fn a_new_key_is_private_random_and_never_overwritten() {
-        let store = temp_store("new");
+        let (_scratch, store) = temp_store("new");
         let a = store.create("alpha").expect("create");
         let b = store.create("beta").expect("create");
         #[cfg(unix)]
@@ -297,7 +307,7 @@ mod tests {
 
     #[test]
     fn keys_others_may_read_or_bad_names_are_refused_with_what_to_do() {
-        let store = temp_store("perm");
+        let (_scratch, store) = temp_store("perm");
         let path = store.create("alpha").expect("create");
         #[cfg(unix)]
         {
