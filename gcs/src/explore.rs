@@ -207,9 +207,6 @@ pub struct DroneSummary {
     pub flight_pose_error_m: Option<f64>,
     /// Camera frames the SLAM could not track.
     pub lost_frames: usize,
-    /// Of those, frames whose depth, matched against the map's walls, corrected the pose the
-    /// drone flew on.
-    pub scan_fixes: u64,
     /// Wall collisions.
     pub collisions: u32,
     /// The phase it ended in.
@@ -655,7 +652,6 @@ fn watch(
                     flight_pose_error_m: (flight_error[k].1 > 0)
                         .then(|| (flight_error[k].0 / flight_error[k].1 as f64).sqrt()),
                     lost_frames: perception.slam.estimate(k).map_or(0, |e| e.lost_frames),
-                    scan_fixes: report.drones[k].scan_fixes,
                     collisions: collisions[k],
                     final_phase: report.drones[k].phase.name(),
                     rc_frames: rc.get(k).and_then(Option::as_ref).map(|r| r.frames),

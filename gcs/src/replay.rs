@@ -351,8 +351,6 @@ fn sample_at(states: &[DroneState], t: f64) -> Option<SensorSample> {
         height: s.height_m.map(f64::from),
         tilt: s.tilt,
         body: s.pose,
-        // Not recorded; only the runtime's scan matching reads it.
-        placed: None,
     })
 }
 

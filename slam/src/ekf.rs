@@ -190,12 +190,6 @@ enum Op {
         roll: f64,
         pitch: f64,
     },
-    Along {
-        t: f64,
-        axis: [f64; 2],
-        value: f64,
-        variance: f64,
-    },
 }
 
 /// A journal entry: the call, and after a prediction the filter as it then was (its journal
@@ -283,14 +277,6 @@ impl Ekf {
             Op::Attitude { t, roll, pitch } => {
                 self.update_attitude(t, roll, pitch);
             }
-            Op::Along {
-                t,
-                axis,
-                value,
-                variance,
-            } => {
-                self.update_position_along(t, axis, value, variance);
-            }
         }
     }
 
@@ -356,12 +342,6 @@ impl Ekf {
     pub fn valid_estimate(&self) -> Option<Estimate> {
         let e = self.estimate();
         (self.fixed && e.position_sigma <= self.config.max_position_sigma).then_some(e)
-    }
-
-    /// The estimate once a SLAM fix has placed the vehicle, however uncertain it has grown
-    /// since: where to search for it (a scan match), not a pose to fly on.
-    pub fn placed_estimate(&self) -> Option<Estimate> {
-        self.fixed.then(|| self.estimate())
     }
 
     /// Sets the sticks in force from now on.
@@ -516,18 +496,6 @@ impl Ekf {
             y[k] = if angular[k] { wrap(d) } else { d };
             rm[(k, k)] = r[k];
         }
-        self.correct(h, y, rm, force)
-    }
-
-    /// The Kalman correction for a measurement `h`·x with innovation `y` and noise `rm`
-    /// (`force`: skip the innovation gate).
-    fn correct<const M: usize>(
-        &mut self,
-        h: SMatrix<f64, M, N>,
-        y: SVector<f64, M>,
-        rm: SMatrix<f64, M, M>,
-        force: bool,
-    ) -> Update {
         let s = h * self.p * h.transpose() + rm;
         let Some(s_inv) = s.try_inverse() else {
             return Update::Ignored;
@@ -658,43 +626,6 @@ impl Ekf {
         let update = self.update(t, [ROLL, PITCH], [roll, pitch], [r, r], [true, true], false);
         self.record(Op::Attitude { t, roll, pitch });
         update
-    }
-
-    /// The horizontal position along one direction, taken at time `t`: `axis · position` (a
-    /// unit `axis`) is `value` with variance `variance` (m²) — what a depth scan matched
-    /// against a wall measures (across the wall, nothing along it). Gated like any
-    /// measurement, and only once a SLAM fix has placed the vehicle: it corrects a position, it
-    /// does not give one.
-    pub fn update_position_along(
-        &mut self,
-        t: f64,
-        axis: [f64; 2],
-        value: f64,
-        variance: f64,
-    ) -> Update {
-        let update = self.along_now(t, axis, value, variance);
-        self.record(Op::Along {
-            t,
-            axis,
-            value,
-            variance,
-        });
-        update
-    }
-
-    fn along_now(&mut self, t: f64, axis: [f64; 2], value: f64, variance: f64) -> Update {
-        let unit = (axis[0].hypot(axis[1]) - 1.0).abs() < 1e-6;
-        if !(self.fixed && unit && variance > 0.0 && variance.is_finite() && value.is_finite()) {
-            return Update::Ignored;
-        }
-        let Some(then) = self.state_at(t) else {
-            return Update::Ignored;
-        };
-        let mut h = SMatrix::<f64, 1, N>::zeros();
-        h[(0, PX)] = axis[0];
-        h[(0, PY)] = axis[1];
-        let y = SVector::<f64, 1>::new(value - axis[0] * then[PX] - axis[1] * then[PY]);
-        self.correct(h, y, SMatrix::<f64, 1, 1>::new(variance), false)
     }
 }
 
@@ -910,62 +841,6 @@ mod tests {
         assert!(ekf.valid_estimate().is_some());
         ekf.predict(30.0);
         assert!(ekf.valid_estimate().is_none());
-    }
-
-    #[test]
-    fn a_position_known_across_a_corridor_corrects_only_across_it() {
-        // A corridor along the line y = x: a scan says the vehicle is 0.2 m across it from
-        // where the filter has it (σ 3 cm), and nothing about where along it.
-        let across = [
-            -std::f64::consts::FRAC_1_SQRT_2,
-            std::f64::consts::FRAC_1_SQRT_2,
-        ];
-        let variance = 0.03f64.powi(2);
-        let mut ekf = Ekf::new(EkfConfig::default(), 0.0, [0.0, 0.0, 1.0], 0.0);
-        assert_eq!(
-            ekf.update_position_along(0.0, across, 0.2, variance),
-            Update::Ignored,
-            "no fix yet"
-        );
-        ekf.update_slam(0.0, [0.0, 0.0, 1.0], 0.0);
-        // The SLAM lost for a second: dead reckoning only.
-        ekf.predict(1.0);
-        for k in 11..=50 {
-            let t = f64::from(k) * 0.1;
-            ekf.predict(t);
-            let u = ekf.update_position_along(t, across, 0.2, variance);
-            assert_eq!(u, Update::Applied, "{t}");
-        }
-        let e = ekf.estimate();
-        let (x, y) = (e.position[0], e.position[1]);
-        let off_across = x * across[0] + y * across[1];
-        let off_along = x * across[1] - y * across[0];
-        assert!((off_across - 0.2).abs() < 0.01, "across {off_across}");
-        assert!(off_along.abs() < 1e-6, "along {off_along}");
-        // Across the corridor the filter stays sure, along it only dead-reckons.
-        let sure = across[0] * across[0] * ekf.p[(PX, PX)]
-            + 2.0 * across[0] * across[1] * ekf.p[(PX, PY)]
-            + across[1] * across[1] * ekf.p[(PY, PY)];
-        let trace = ekf.p[(PX, PX)] + ekf.p[(PY, PY)];
-        assert!(sure.sqrt() < 0.03, "across σ {}", sure.sqrt());
-        assert!(
-            (trace - sure).sqrt() > 0.3,
-            "along σ {}",
-            (trace - sure).sqrt()
-        );
-        // What is no measurement is refused.
-        for (axis, value, variance) in [
-            ([1.0, 1.0], 0.0, 0.01),
-            ([1.0, 0.0], f64::NAN, 0.01),
-            ([1.0, 0.0], 0.0, 0.0),
-            ([1.0, 0.0], 0.0, f64::INFINITY),
-        ] {
-            let u = ekf.update_position_along(5.0, axis, value, variance);
-            assert_eq!(u, Update::Ignored, "{axis:?} {value} {variance}");
-        }
-        // A claim far beyond what the covariances allow is an outlier.
-        let u = ekf.update_position_along(5.0, across, 3.0, variance);
-        assert_eq!(u, Update::Outlier);
     }
 
     #[test]

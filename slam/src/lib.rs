@@ -22,6 +22,5 @@ pub mod optimize;
 pub mod place;
 pub mod posegraph;
 pub mod rigid;
-pub mod scanmatch;
 pub mod system;
 pub mod trajectory;

@@ -361,40 +361,6 @@ impl VoxelMap {
         Some(grid)
     }
 
-    /// The occupied voxels of the projection band in the columns `lo..hi` (cell indices of the
-    /// 2D grid, x and y, `hi` exclusive), counted per column, row-major (width `hi[0] − lo[0]`):
-    /// [`VoxelMap::project`] for a window, without walking the whole map.
-    pub fn band_counts(&self, lo: [i32; 2], hi: [i32; 2]) -> Vec<u16> {
-        let r = self.config.resolution;
-        let z0 = (self.config.occupancy_min_z / r).floor() as i32;
-        let z1 = (self.config.occupancy_max_z / r).ceil() as i32 - 1;
-        let (w, h) = ((hi[0] - lo[0]).max(0), (hi[1] - lo[1]).max(0));
-        let mut counts = vec![0u16; (w * h) as usize];
-        if w == 0 || h == 0 {
-            return counts;
-        }
-        for kz in z0.div_euclid(CHUNK)..=z1.div_euclid(CHUNK) {
-            for ky in lo[1].div_euclid(CHUNK)..=(hi[1] - 1).div_euclid(CHUNK) {
-                for kx in lo[0].div_euclid(CHUNK)..=(hi[0] - 1).div_euclid(CHUNK) {
-                    let Some(&c) = self.index.get(&[kx, ky, kz]) else {
-                        continue;
-                    };
-                    for (i, l) in self.chunks[c].1.iter().enumerate() {
-                        let v = join([kx, ky, kz], i);
-                        let inside = (lo[0]..hi[0]).contains(&v[0])
-                            && (lo[1]..hi[1]).contains(&v[1])
-                            && (z0..=z1).contains(&v[2]);
-                        if *l > 0.0 && inside {
-                            let cell = ((v[1] - lo[1]) * w + (v[0] - lo[0])) as usize;
-                            counts[cell] = counts[cell].saturating_add(1);
-                        }
-                    }
-                }
-            }
-        }
-        counts
-    }
-
     /// Writes the occupied voxels as an ASCII PLY point cloud (x, y, z in metres).
     pub fn write_ply(&self, path: &Path) -> io::Result<()> {
         let points = self.occupied();

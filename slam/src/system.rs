@@ -706,11 +706,6 @@ impl Slam {
         self.robots.len()
     }
 
-    /// Robot `robot`'s camera mounting and start, as given to [`Slam::new`].
-    pub fn setup(&self, robot: usize) -> Option<&RobotSetup> {
-        self.robots.get(robot).map(|r| &r.setup)
-    }
-
     /// A handle on the occupancy map of the map frame, for readers on other threads.
     pub fn map(&self) -> MapHandle {
         self.map.handle()

@@ -11,7 +11,6 @@ use nav::avoid::{KeepClear, keep_clear};
 use nav::control::{PidGains, Pose3, PositionController, PositionGains};
 use nav::local::{Follow, FollowerConfig, PathFollower, Pose2, wrap_angle};
 use slam::ekf::{Ekf, EkfConfig, Input, Update};
-use slam::scanmatch::ScanFix;
 
 /// What a drone is doing.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -256,8 +255,6 @@ pub struct Drone {
     pub trajectory: Vec<(f64, [f64; 4])>,
     /// Distance flown according to the filter, metres.
     pub path_length: f64,
-    /// Scan fixes its filter took while the SLAM had lost it.
-    pub scan_fixes: u64,
     /// Messages for the operator since the last call of [`Drone::take_messages`].
     messages: Vec<String>,
 }
@@ -314,7 +311,6 @@ impl Drone {
             sticks: None,
             trajectory: vec![],
             path_length: 0.0,
-            scan_fixes: 0,
             messages: vec![],
         }
     }
@@ -530,21 +526,6 @@ impl Drone {
             Some(k) if (k[0] - p[0]).hypot(k[1] - p[1]) <= config.lost_back_m => k,
             _ => [p[0], p[1]],
         });
-    }
-
-    /// While the SLAM has lost it: its depth matched against the map's walls, taken at
-    /// `stamp`, corrects the filter along the directions the walls fix (it keeps a pose while
-    /// it flies back to where the camera last saw the map, instead of drifting blind).
-    pub fn scan_fix(&mut self, stamp: f64, fix: &ScanFix) {
-        let mut used = false;
-        for along in &fix.known {
-            let value = along.axis[0] * fix.position[0] + along.axis[1] * fix.position[1];
-            let update = self
-                .ekf
-                .update_position_along(stamp, along.axis, value, along.variance);
-            used |= update == Update::Applied;
-        }
-        self.scan_fixes += u64::from(used);
     }
 
     /// The filter's roll and pitch (radians): the attitude the vehicle reports, else what the
@@ -1260,56 +1241,6 @@ mod tests {
         }
         assert_eq!(event, Some(DroneEvent::GiveUp([1.0, 0.0])));
         assert!(drone.scan.is_none());
-    }
-
-    #[test]
-    fn a_lost_drone_whose_depth_sees_mapped_walls_keeps_its_pose() {
-        use slam::scanmatch::Along;
-        let config = DroneConfig::default();
-        let x = Along {
-            axis: [1.0, 0.0],
-            variance: 0.03f64.powi(2),
-        };
-        let y = Along {
-            axis: [0.0, 1.0],
-            ..x
-        };
-        // Lost at (0.5, 0), and for 10 s only depth scans: of a corner (both ways fixed), or
-        // of one wall across x.
-        let lost_with = |known: Vec<Along>| {
-            let mut drone = exploring_drone(Arc::default(), &config);
-            drone.slam_fix(0.1, [0.5, 0.0, 0.9], 0.0, true);
-            drone.slam_lost(&config);
-            let fix = ScanFix {
-                position: [0.5, 0.0],
-                yaw: 0.0,
-                known,
-                matched: 0.8,
-                points: 300,
-            };
-            let mut valid = 0.0;
-            for k in 2..=100 {
-                let t = f64::from(k) * 0.1;
-                drone.tick(t, &config);
-                drone.scan_fix(t - 0.05, &fix);
-                if drone.pose().is_some() {
-                    valid = t;
-                }
-            }
-            (drone, valid)
-        };
-        let (corner, valid) = lost_with(vec![x, y]);
-        assert!(valid > 9.9, "the pose expired at {valid:.1} s");
-        assert_eq!(corner.scan_fixes, 99);
-        let p = corner.pose().expect("a pose");
-        assert!((p[0] - 0.5).hypot(p[1]) < 0.05, "{p:?}");
-        // One wall fixes one direction: along it the filter only dead-reckons, and the pose
-        // expires (later than without any scan, about 1 s).
-        let (one_wall, valid) = lost_with(vec![x]);
-        assert!((1.5..9.0).contains(&valid), "expired at {valid:.1} s");
-        assert!(one_wall.scan_fixes > 0);
-        let (_, valid) = lost_with(vec![]);
-        assert!(valid < 1.5, "expired at {valid:.1} s");
     }
 
     #[test]

@@ -257,8 +257,6 @@ pub struct DroneReport {
     pub phase: Phase,
     /// Distance flown according to the filter, metres.
     pub path_length_m: f64,
-    /// Scan fixes its filter took while the SLAM had lost it.
-    pub scan_fixes: u64,
     /// The filter's trajectory: (time, [x, y, z, yaw]).
     pub trajectory: Vec<(f64, [f64; 4])>,
 }
@@ -446,9 +444,6 @@ impl Mission {
                         d.slam_fix(fix.stamp, [v.x, v.y, v.z], x.y.atan2(x.x), fix.keyframe);
                     } else {
                         d.slam_lost(&self.config.drone);
-                        if let Some(scan) = &fix.scan {
-                            d.scan_fix(fix.stamp, scan);
-                        }
                     }
                 }
             }
@@ -532,7 +527,6 @@ impl Mission {
                     name: d.name.clone(),
                     phase: d.phase,
                     path_length_m: d.path_length,
-                    scan_fixes: d.scan_fixes,
                     trajectory: d.trajectory.clone(),
                 })
                 .collect(),
@@ -642,10 +636,6 @@ impl Mission {
                     height: t.height_m.map(f64::from),
                     tilt: Some(d.tilt()),
                     body: d.pose(),
-                    placed: d.ekf.placed_estimate().map(|e| {
-                        let [x, y, z] = e.position;
-                        ([x, y, z, e.attitude[2]], e.position_sigma)
-                    }),
                 },
             );
             if let Some(r) = &self.recorder {

@@ -13,8 +13,6 @@ use std::time::Duration;
 use link::camera::RgbdFrame;
 use nalgebra::Isometry3;
 use slam::livemap::MapHandle;
-use slam::occupancy::DepthImage;
-use slam::scanmatch::{ScanFix, ScanMatchConfig, match_depth};
 use slam::system::{Frame, RobotEstimate, Slam, SlamStats, Tracking};
 use slam::trajectory::Stamped;
 
@@ -47,9 +45,6 @@ pub struct SensorSample {
     pub tilt: Option<[f64; 2]>,
     /// The filter's body pose (x, y, z, yaw), if valid.
     pub body: Option<[f64; 4]>,
-    /// The filter's body pose (x, y, z, yaw) and its horizontal standard deviation (metres),
-    /// once a SLAM fix has placed it, valid or not: where a lost drone's depth is matched.
-    pub placed: Option<([f64; 4], f64)>,
 }
 
 /// The recent sensor samples of every drone (written by the control loop).
@@ -112,7 +107,7 @@ impl SensorLog {
 pub const MAX_HEADING_RATE: f64 = 0.17;
 
 /// A SLAM pose of one drone's body at a frame's time (`None`: tracking lost).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SlamFix {
     /// The drone.
     pub drone: usize,
@@ -125,17 +120,7 @@ pub struct SlamFix {
     /// Matches that agreed with the frame's pose when it was tracked (how much of the map the
     /// camera sees: few, and the next frame may be lost); `None` when relocalised or lost.
     pub inliers: Option<usize>,
-    /// While lost: the frame's depth matched against the map's walls around the filter's
-    /// pose, where the walls in view fix it.
-    pub scan: Option<ScanFix>,
 }
-
-/// The window a lost drone's depth is matched in: three of the filter's standard deviations,
-/// within these bounds (metres).
-const SCAN_SEARCH_M: (f64, f64) = (0.15, 0.5);
-
-/// Candidate positions along each axis of the window (the step grows with the window).
-const SCAN_STEPS: f64 = 40.0;
 
 /// The SLAM's state for displays.
 #[derive(Debug, Clone, Default)]
@@ -276,7 +261,6 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
     let mut truth = vec![vec![]; n];
     let mut online = vec![vec![]; n];
     let mut times: VecDeque<f64> = VecDeque::new();
-    let scanning = ScanMatchConfig::default();
     while !stop.load(Ordering::Relaxed) {
         let Ok(f) = frames.recv_timeout(Duration::from_millis(50)) else {
             continue;
@@ -298,8 +282,7 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
             continue;
         }
         let known = slam.config().known_poses;
-        let sample = sensors.at(k, f.stamp);
-        let Some(frame) = slam_frame(&f, sample, known) else {
+        let Some(frame) = slam_frame(&f, sensors.at(k, f.stamp), known) else {
             tracing::warn!(drone = k + 1, "malformed camera frame dropped");
             continue;
         };
@@ -328,16 +311,10 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
         if let Some(pose) = estimate.as_ref().and_then(RobotEstimate::map_from_camera) {
             online[k].push(Stamped { t: f.stamp, pose });
         }
-        let map_from_body = estimate.as_ref().and_then(RobotEstimate::map_from_body);
-        let scan = match (map_from_body, sample) {
-            (None, Some(sample)) => scan_match(&slam, &f, sample, &scanning),
-            _ => None,
-        };
         let _ = fixes.send(SlamFix {
             drone: k,
             stamp: f.stamp,
-            map_from_body,
-            scan,
+            map_from_body: estimate.as_ref().and_then(RobotEstimate::map_from_body),
             keyframe: report.keyframe.is_some(),
             inliers: match report.tracking {
                 Tracking::Tracked { inliers } => Some(inliers),
@@ -358,78 +335,6 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
         slam,
         truth,
         online,
-    }
-}
-
-/// A lost drone's frame matched against the map's walls around where its filter has it: `None`
-/// before the filter was placed, or when the walls in view fix nothing — or, once the pose
-/// has expired (the drone drifting blind), fix less than both directions: a drone is placed
-/// again only by a corner.
-fn scan_match(
-    slam: &Slam,
-    f: &CameraFrame,
-    sample: SensorSample,
-    config: &ScanMatchConfig,
-) -> Option<ScanFix> {
-    let ([x, y, z, yaw], sigma) = sample.placed?;
-    // Turning fast, the filter's heading is degrees off the camera's (telemetry lags): at 4 m
-    // each degree is 7 cm.
-    sample.heading?;
-    sample.body?;
-    let [roll, pitch] = sample.tilt.unwrap_or([0.0; 2]);
-    let map_from_body = Isometry3::from_parts(
-        nalgebra::Translation3::new(x, y, z),
-        nalgebra::UnitQuaternion::from_euler_angles(roll, pitch, yaw),
-    );
-    let body_from_camera = slam.setup(f.drone)?.body_from_camera;
-    let i = f.frame.intrinsics;
-    let image = DepthImage {
-        width: f.frame.width as usize,
-        height: f.frame.height as usize,
-        depth: &f.frame.depth_mm,
-        depth_scale: 0.001,
-        intrinsics: [i.fx, i.fy, i.cx, i.cy].map(f64::from),
-    };
-    let search = (3.0 * sigma).clamp(SCAN_SEARCH_M.0, SCAN_SEARCH_M.1);
-    let config = ScanMatchConfig {
-        step_m: config.step_m.max(2.0 * search / SCAN_STEPS),
-        ..config.clone()
-    };
-    let matched = slam.map().with(|map| {
-        match_depth(
-            map,
-            &image,
-            &map_from_body,
-            &body_from_camera,
-            search,
-            &config,
-        )
-    });
-    match matched {
-        Ok(fix) if sample.body.is_none() && fix.known.len() < 2 => {
-            tracing::debug!(
-                drone = f.drone + 1,
-                "no scan fix: one wall does not place a blind drone"
-            );
-            None
-        }
-        Ok(fix) => {
-            tracing::debug!(
-                drone = f.drone + 1,
-                stamp = f.stamp,
-                x = fix.position[0],
-                y = fix.position[1],
-                shift = (fix.position[0] - x).hypot(fix.position[1] - y),
-                matched = fix.matched,
-                sigmas = ?fix.known.iter().map(|a| a.variance.sqrt()).collect::<Vec<_>>(),
-                "scan fix"
-            );
-            Some(fix)
-        }
-        Err(why) => {
-            tracing::debug!(drone = f.drone + 1, "no scan fix: {why}");
-            None
-        }
     }
 }
 
@@ -476,7 +381,6 @@ mod tests {
             height: Some(0.9),
             tilt: None,
             body: None,
-            placed: None,
         }
     }
 
