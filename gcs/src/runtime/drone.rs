@@ -189,6 +189,18 @@ struct Scan {
     cut: bool,
 }
 
+impl Scan {
+    /// A look around starting at `since` from heading `yaw0`, giving up `give_up` after it.
+    fn new(since: f64, yaw0: f64, give_up: Option<[f64; 2]>) -> Self {
+        Self {
+            since,
+            yaw0,
+            give_up,
+            cut: false,
+        }
+    }
+}
+
 /// A drone in the mission.
 pub struct Drone {
     /// Index in the fleet.
@@ -699,12 +711,7 @@ impl Drone {
                 if pose[2] > self.altitude - 0.1 {
                     // Airborne: look around once, so the first plan sees every side.
                     self.phase = Phase::Exploring;
-                    self.scan = Some(Scan {
-                        since: now,
-                        yaw0: pose[3],
-                        give_up: None,
-                        cut: false,
-                    });
+                    self.scan = Some(Scan::new(now, pose[3], None));
                     self.progress = (now, here);
                 }
             }
@@ -855,12 +862,7 @@ impl Drone {
         }
         if let Follow::Arrived = self.follow(pose) {
             self.follower.set_path(vec![]);
-            self.scan = Some(Scan {
-                since: now,
-                yaw0: pose[3],
-                give_up: self.goal.take(),
-                cut: false,
-            });
+            self.scan = Some(Scan::new(now, pose[3], self.goal.take()));
             self.hold = here;
             return None;
         }
@@ -1025,12 +1027,7 @@ mod tests {
         let config = DroneConfig::default();
         let mut drone = exploring_drone(Arc::default(), &config);
         // Looking around at the start (0, 0), facing +x.
-        drone.scan = Some(Scan {
-            since: 0.0,
-            yaw0: 0.0,
-            give_up: None,
-            cut: false,
-        });
+        drone.scan = Some(Scan::new(0.0, 0.0, None));
         drone.hold = [0.6 * config.hold_band_m, 0.0];
         drone.tick(0.1, &config);
         let s = drone.sticks.expect("sticks");
@@ -1051,12 +1048,7 @@ mod tests {
         // Looking around at (0, 0) facing +x, its hold 0.5 m ahead; a wall's face 0.3 m ahead.
         let scanning = |map: Option<Grid>| {
             let mut drone = exploring_drone(Arc::default(), &config);
-            drone.scan = Some(Scan {
-                since: 0.0,
-                yaw0: 0.0,
-                give_up: None,
-                cut: false,
-            });
+            drone.scan = Some(Scan::new(0.0, 0.0, None));
             drone.hold = [0.5, 0.0];
             if let Some(map) = map {
                 drone.set_map(Arc::new(map));
@@ -1207,12 +1199,7 @@ mod tests {
     fn a_look_around_that_loses_the_map_ends_where_the_map_is_found_again() {
         let config = DroneConfig::default();
         let mut drone = exploring_drone(Arc::default(), &config);
-        drone.scan = Some(Scan {
-            since: 0.0,
-            yaw0: 0.0,
-            give_up: Some([1.0, 0.0]),
-            cut: false,
-        });
+        drone.scan = Some(Scan::new(0.0, 0.0, Some([1.0, 0.0])));
         let mut t = 0.0;
         let mut yaw = 0.0;
         // Turning, a keyframe now and then, for 2 s.
