@@ -15,7 +15,6 @@ pub mod mission;
 pub mod render;
 pub mod search;
 pub mod vantage;
-pub mod view;
 
 pub use grid::{Cell, CellXY, Grid, MapError};
 pub use mission::{Plan, PlanError, PlannerConfig, RobotPlan, Strategy, explored_part, plan};

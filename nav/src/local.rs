@@ -164,7 +164,7 @@ pub enum Follow {
         /// Heading to turn to, radians.
         yaw: f64,
     },
-    /// Fly to the carrot, facing `yaw` (where the drone goes, unless told to look aside).
+    /// Fly to the carrot, facing `yaw` (the camera looks where the drone goes).
     Track {
         /// Position setpoint, map frame.
         carrot: [f64; 2],
@@ -208,19 +208,8 @@ impl PathFollower {
         &self.path
     }
 
-    /// One tick with the latest pose (`None`: invalid), facing the way the drone goes.
+    /// One tick with the latest pose (`None`: invalid).
     pub fn step(&mut self, pose: Option<Pose2>) -> Follow {
-        self.step_facing(pose, |_, bearing| bearing)
-    }
-
-    /// One tick, facing `face(position, bearing)` for the bearing to the carrot: the heading the
-    /// turn-first rule and the track use (a camera that would see nothing along the path may
-    /// look aside, [`crate::view::facing`]).
-    pub fn step_facing(
-        &mut self,
-        pose: Option<Pose2>,
-        face: impl Fn([f64; 2], f64) -> f64,
-    ) -> Follow {
         let Some(pose) = pose.filter(|p| p.x.is_finite() && p.y.is_finite() && p.yaw.is_finite())
         else {
             return Follow::Hover;
@@ -233,7 +222,7 @@ impl PathFollower {
             return Follow::Arrived;
         }
         if self.path.len() == 1 {
-            return self.aim(pose, first, first, face);
+            return self.aim(pose, first, first);
         }
         // Progress: the nearest point on the segments from the current one on (never backwards).
         let (mut best, mut best_d, mut best_t) = (self.segment, f64::INFINITY, 0.0);
@@ -266,18 +255,12 @@ impl PathFollower {
             left = (left - len).min(self.config.corner_m);
             from = to;
         }
-        self.aim(pose, nearest, carrot, face)
+        self.aim(pose, nearest, carrot)
     }
 
-    fn aim(
-        &mut self,
-        pose: Pose2,
-        nearest: [f64; 2],
-        carrot: [f64; 2],
-        face: impl Fn([f64; 2], f64) -> f64,
-    ) -> Follow {
+    fn aim(&mut self, pose: Pose2, nearest: [f64; 2], carrot: [f64; 2]) -> Follow {
         let (dx, dy) = (carrot[0] - pose.x, carrot[1] - pose.y);
-        let yaw = face([pose.x, pose.y], dy.atan2(dx));
+        let yaw = dy.atan2(dx);
         let error = wrap_angle(yaw - pose.yaw).abs();
         self.turning = if self.turning {
             error > self.config.resume_threshold_rad
@@ -473,34 +456,5 @@ mod tests {
         assert!((e.to_degrees() - 0.2).abs() < 1e-9, "{}", e.to_degrees());
         assert!((wrap_angle(3.0 * PI) - PI).abs() < 1e-12);
         assert!((wrap_angle(-PI) - PI).abs() < 1e-12);
-    }
-
-    #[test]
-    fn a_follower_told_to_look_aside_tracks_facing_that_way() {
-        let mut f = PathFollower::new(FollowerConfig::default());
-        f.set_path(vec![[0.0, 0.0], [5.0, 0.0]]);
-        let aside = |_: [f64; 2], bearing: f64| bearing + 0.8;
-        // Facing along the path: 0.8 rad (46°) off the heading asked for, a turn first.
-        let at = Some(Pose2 {
-            x: 0.0,
-            y: 0.0,
-            yaw: 0.0,
-        });
-        assert!(
-            matches!(f.step_facing(at, aside), Follow::Turn { yaw, .. } if (yaw - 0.8).abs() < 1e-9)
-        );
-        // Facing that way: it flies along the path, still facing aside.
-        let at = Some(Pose2 {
-            x: 0.0,
-            y: 0.0,
-            yaw: 0.8,
-        });
-        match f.step_facing(at, aside) {
-            Follow::Track { carrot, yaw } => {
-                assert!((yaw - 0.8).abs() < 1e-9);
-                assert!(carrot[0] > 0.0 && carrot[1].abs() < 1e-9, "{carrot:?}");
-            }
-            other => panic!("{other:?}"),
-        }
     }
 }

@@ -10,7 +10,6 @@ use nav::Grid;
 use nav::avoid::{KeepClear, keep_clear};
 use nav::control::{PidGains, Pose3, PositionController, PositionGains};
 use nav::local::{Follow, FollowerConfig, PathFollower, Pose2, wrap_angle};
-use nav::view::{DepthView, Facing, facing, view_score};
 use slam::ekf::{Ekf, EkfConfig, Input, Update};
 
 /// What a drone is doing.
@@ -100,15 +99,6 @@ pub struct DroneConfig {
     /// the drone's centre, leads back out to it, and leads less far near walls
     /// ([`nav::avoid::keep_clear`]).
     pub keep_clear: KeepClear,
-    /// The depth camera as the map sees it: which headings give the SLAM depth to track.
-    pub view: DepthView,
-    /// Following a path, look aside where the camera would see nothing in range along it
-    /// ([`nav::view::facing`]); `None`: always face along the path.
-    pub facing: Option<Facing>,
-    /// A look around turns back before a heading whose view scores under this
-    /// ([`nav::view::view_score`]: a door into a room deeper than the depth's range), and ends
-    /// at the next such heading the other way; 0: it turns all the way round.
-    pub look_around_min_view: f64,
     /// Seconds without 0.3 m of progress toward a goal before it is given up.
     pub stuck_s: f64,
     /// A look around on the spot takes this long, seconds.
@@ -172,9 +162,6 @@ impl Default for DroneConfig {
             ekf: EkfConfig::default(),
             hold_band_m: 0.1,
             keep_clear: KeepClear::default(),
-            view: DepthView::default(),
-            facing: Some(Facing::default()),
-            look_around_min_view: 0.3,
             stuck_s: 15.0,
             scan_s: 10.0,
             blind_yaw: 0.2,
@@ -200,9 +187,6 @@ struct Scan {
     /// The SLAM lost the drone during it: turning on would lose it again where it did (a
     /// door close ahead, the room behind beyond the depth's range), so it ends once found.
     cut: bool,
-    /// When it turned back before a heading the camera would see nothing from, and how far it
-    /// had turned then, radians.
-    back: Option<(f64, f64)>,
 }
 
 impl Scan {
@@ -213,7 +197,6 @@ impl Scan {
             yaw0,
             give_up,
             cut: false,
-            back: None,
         }
     }
 }
@@ -740,7 +723,7 @@ impl Drone {
                     self.land();
                     return None;
                 }
-                self.follow(pose, config);
+                self.follow(pose);
             }
             Phase::Holding => {}
             _ => return None,
@@ -823,18 +806,12 @@ impl Drone {
         None
     }
 
-    fn follow(&mut self, pose: [f64; 4], config: &DroneConfig) -> Follow {
-        let pose2 = Some(Pose2 {
+    fn follow(&mut self, pose: [f64; 4]) -> Follow {
+        let f = self.follower.step(Some(Pose2 {
             x: pose[0],
             y: pose[1],
             yaw: pose[3],
-        });
-        let f = match (&self.map, &config.facing) {
-            (Some(map), Some(look)) => self.follower.step_facing(pose2, |at, heading| {
-                facing(map, at, heading, &config.view, look)
-            }),
-            _ => self.follower.step(pose2),
-        };
+        }));
         match f {
             Follow::Turn { at, yaw } => {
                 // Hold where the turn began: a spot that slid along the path with the drone
@@ -866,39 +843,14 @@ impl Drone {
         if (here[0] - self.progress.1[0]).hypot(here[1] - self.progress.1[1]) > 0.3 {
             self.progress = (now, here);
         }
-        if let Some(scan) = &mut self.scan {
-            // A full turn on the spot (36°/s), then the goal (if any) is given up. Before a
-            // heading the camera would see nothing from, it turns back and sweeps the other way
-            // until the next such heading or a full turn.
-            let rate = std::f64::consts::TAU / config.scan_s;
-            let (turned, way, left) = match scan.back {
-                None => (
-                    (now - scan.since) * rate,
-                    1.0,
-                    config.scan_s - (now - scan.since),
-                ),
-                Some((t, at)) => {
-                    let turned = at - (now - t) * rate;
-                    (turned, -1.0, (turned - (at - std::f64::consts::TAU)) / rate)
-                }
-            };
-            let ahead = scan.yaw0 + turned + way * config.view.hfov_rad / 2.0;
-            let empty_ahead = self.map.as_ref().is_some_and(|map| {
-                view_score(map, here, ahead, &config.view) < config.look_around_min_view
-            });
-            if left > 0.0 && !scan.cut && !(empty_ahead && scan.back.is_some()) {
-                if empty_ahead {
-                    tracing::info!(
-                        drone = self.id + 1,
-                        "the look around turns back before a view with nothing in the depth's range"
-                    );
-                    scan.back = Some((now, turned));
-                }
-                self.yaw_goal = scan.yaw0 + turned;
+        if let Some(scan) = self.scan {
+            // A full turn on the spot (36°/s), then the goal (if any) is given up.
+            let t = now - scan.since;
+            if t < config.scan_s && !scan.cut {
+                self.yaw_goal = scan.yaw0 + t * std::f64::consts::TAU / config.scan_s;
                 self.progress = (now, here);
                 return None;
             }
-            let scan = *scan;
             if scan.cut {
                 tracing::info!(
                     drone = self.id + 1,
@@ -908,7 +860,7 @@ impl Drone {
             self.scan = None;
             return scan.give_up.map(DroneEvent::GiveUp);
         }
-        if let Follow::Arrived = self.follow(pose, config) {
+        if let Follow::Arrived = self.follow(pose) {
             self.follower.set_path(vec![]);
             self.scan = Some(Scan::new(now, pose[3], self.goal.take()));
             self.hold = here;
@@ -1241,109 +1193,6 @@ mod tests {
         let (drone, where_lost, _) = lost_after_keyframe_at(0.1 - config.lost_back_m - 0.2);
         assert!(where_lost[0] > 0.0, "lost at the last fix: {where_lost:?}");
         assert_eq!(drone.hold, [where_lost[0], where_lost[1]]);
-    }
-
-    /// A hall 5 m wide (x from −2.5 to 2.5 m) with its south wall at y = −1.5 m, open to the
-    /// north for 8 m (known free: the camera at the origin sees nothing in range that way), or
-    /// closed by a wall at y = 2 m.
-    fn hall(open_north: bool) -> Grid {
-        let mut map = Grid::new(120, 220, 0.05, [-3.0, -2.0], nav::Cell::Free);
-        for y in 0..220 {
-            map.set((10, y), nav::Cell::Occupied); // x = −2.5 m
-            map.set((110, y), nav::Cell::Occupied); // x = 2.5 m
-        }
-        for x in 0..120 {
-            map.set((x, 10), nav::Cell::Occupied); // y = −1.5 m
-            if !open_north {
-                map.set((x, 80), nav::Cell::Occupied); // y = 2 m
-            }
-        }
-        map
-    }
-
-    /// Looks around at the origin from heading 0 (following its yaw goal exactly) until the
-    /// look around ends: every yaw goal it had, and when it ended.
-    fn look_around(map: Grid, config: &DroneConfig) -> (Vec<f64>, f64) {
-        let mut drone = exploring_drone(Arc::default(), config);
-        drone.set_map(Arc::new(map));
-        drone.scan = Some(Scan::new(0.0, 0.0, None));
-        let (mut t, mut yaws) = (0.0, vec![]);
-        while drone.scan.is_some() {
-            assert!(t < 3.0 * config.scan_s, "the look around never ended");
-            drone.slam_fix(t, [0.0, 0.0, 0.9], drone.yaw_goal, false);
-            drone.tick(t, config);
-            yaws.push(drone.yaw_goal);
-            t += 0.1;
-        }
-        (yaws, t)
-    }
-
-    #[test]
-    fn a_look_around_turns_back_before_a_view_with_nothing_in_range_and_sweeps_the_rest() {
-        use std::f64::consts::{FRAC_PI_2, TAU};
-        let config = DroneConfig::default();
-        // Closed all round: one full turn, one way.
-        let (yaws, _) = look_around(hall(false), &config);
-        assert!(yaws.windows(2).all(|w| w[1] >= w[0]), "turned back");
-        assert!(*yaws.last().expect("yaws") > TAU - 0.1, "{yaws:?}");
-        // Open to the north: it turns back before facing north and sweeps round the other way
-        // until just before north again; the rest of the hall is seen.
-        let (yaws, ended) = look_around(hall(true), &config);
-        let (low, high) = yaws
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &y| {
-                (a.min(y), b.max(y))
-            });
-        let half_fov = config.view.hfov_rad / 2.0;
-        assert!(high < FRAC_PI_2 - 0.3, "faced north: up to {high}");
-        assert!(low > FRAC_PI_2 - TAU + 0.3, "faced north: down to {low}");
-        assert!(
-            high - low > TAU - FRAC_PI_2 - 2.0 * half_fov,
-            "{low}..{high}"
-        );
-        assert!(ended < 1.5 * config.scan_s, "{ended} s");
-        // Switched off, it turns all the way round, north included.
-        let all_round = DroneConfig {
-            look_around_min_view: 0.0,
-            ..config.clone()
-        };
-        let (yaws, _) = look_around(hall(true), &all_round);
-        assert!(*yaws.last().expect("yaws") > TAU - 0.1, "{yaws:?}");
-    }
-
-    #[test]
-    fn a_drone_whose_path_runs_where_its_camera_sees_nothing_in_range_looks_aside() {
-        use std::f64::consts::FRAC_PI_2;
-        // The path north up the open hall; the drone faces north already.
-        let fly_north = |config: &DroneConfig| {
-            let mut drone = exploring_drone(Arc::default(), config);
-            drone.set_map(Arc::new(hall(true)));
-            drone.set_plan(Some([0.0, 3.0]), vec![[0.0, 0.0], [0.0, 3.0]], 0.0);
-            drone.slam_fix(0.1, [0.0, 0.0, 0.9], FRAC_PI_2, false);
-            drone.tick(0.1, config);
-            let face = drone.yaw_goal;
-            // Turned that way, it flies on north.
-            drone.slam_fix(0.2, [0.0, 0.0, 0.9], face, false);
-            drone.tick(0.2, config);
-            (face, drone.yaw_goal, drone.hold)
-        };
-        let config = DroneConfig::default();
-        let (face, still, hold) = fly_north(&config);
-        let off = wrap_angle(face - FRAC_PI_2).abs();
-        let look = config.facing.expect("facing on by default");
-        assert!(off > 0.2 && off <= look.max_offset_rad + 1e-9, "{face}");
-        assert_eq!(still, face);
-        assert!(
-            hold[1] > 0.2 && hold[0].abs() < 1e-9,
-            "along the path: {hold:?}"
-        );
-        // Without it: along the path.
-        let along = DroneConfig {
-            facing: None,
-            ..config.clone()
-        };
-        let (face, _, _) = fly_north(&along);
-        assert!((face - FRAC_PI_2).abs() < 1e-9, "{face}");
     }
 
     #[test]
