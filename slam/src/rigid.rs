@@ -43,14 +43,8 @@ pub fn fit(src: &[Point3<f64>], dst: &[Point3<f64>]) -> Option<Isometry3<f64>> {
 pub struct RansacConfig {
     /// Samples to draw.
     pub iterations: usize,
-    /// A pair is an inlier when `‖dst − T·src‖` is below this, metres…
+    /// A pair is an inlier when `‖dst − T·src‖` is below this, metres.
     pub inlier_distance: f64,
-    /// …times `(z / this)²` for the larger depth `z` of the pair's two points (their `z` in
-    /// camera frames) beyond it, metres: a depth camera's noise grows with the square of the
-    /// depth (Kinect: 0.6 cm at 2 m, 2.6 cm at 4 m along the ray, and the pixel's footprint
-    /// sideways), and a fixed gate refuses most right pairs of a view of walls 3–4 m away.
-    /// `None` (the default; tracking was measured worse with it): the same gate at every depth.
-    pub inlier_growth_from_m: Option<f64>,
     /// Fewer inliers than this: no motion.
     pub min_inliers: usize,
 }
@@ -60,7 +54,6 @@ impl Default for RansacConfig {
         Self {
             iterations: 200,
             inlier_distance: 0.04,
-            inlier_growth_from_m: None,
             min_inliers: 12,
         }
     }
@@ -96,18 +89,9 @@ pub fn ransac(
             .wrapping_add(1_442_695_040_888_963_407);
         ((state >> 33) as usize) % m
     };
-    let gates: Vec<f64> = (0..n)
-        .map(|i| match config.inlier_growth_from_m {
-            Some(from) if from > 0.0 => {
-                let z = src[i].z.max(dst[i].z);
-                config.inlier_distance * (z / from).powi(2).max(1.0)
-            }
-            _ => config.inlier_distance,
-        })
-        .collect();
     let inliers_of = |t: &Isometry3<f64>| -> Vec<usize> {
         (0..n)
-            .filter(|&i| (dst[i] - t * src[i]).norm() < gates[i])
+            .filter(|&i| (dst[i] - t * src[i]).norm() < config.inlier_distance)
             .collect()
     };
     let mut best: Vec<usize> = vec![];
@@ -226,54 +210,5 @@ mod tests {
         let src = cloud(30);
         let dst: Vec<_> = src.iter().rev().copied().collect();
         assert!(ransac(&src, &dst, &RansacConfig::default(), 1).is_none());
-    }
-
-    #[test]
-    fn far_pairs_are_judged_by_a_gate_that_grows_with_their_depth() {
-        // A view of walls 3–4 m away, both frames with a depth camera's noise along the ray
-        // (Kinect: σ = 1.2 mm + 1.9 mm·(z − 0.4)², 2 cm at 3.5 m) and 20 % wrong matches.
-        let sigma = |z: f64| 0.0012 + 0.0019 * (z - 0.4).powi(2);
-        let noisy = |p: Point3<f64>, k: f64| {
-            let n = 2.0 * (k * 12.9898).sin();
-            p + p.coords.normalize() * n * sigma(p.z)
-        };
-        let t = motion();
-        let (mut src, mut dst) = (vec![], vec![]);
-        for i in 0..60 {
-            let f = f64::from(i);
-            let p = Point3::new(
-                3.0 * (f * 0.61).sin(),
-                (f * 0.37).cos(),
-                3.5 + 0.5 * (f * 0.73).sin(),
-            );
-            src.push(noisy(p, f));
-            dst.push(if i % 5 == 0 {
-                Point3::new(f * 0.1 - 3.0, 1.5, 3.0)
-            } else {
-                noisy(t * p, f + 100.0)
-            });
-        }
-        let right = 48;
-        let grown = RansacConfig {
-            inlier_growth_from_m: Some(2.0),
-            ..RansacConfig::default()
-        };
-        let fixed = ransac(&src, &dst, &RansacConfig::default(), 1).map_or(0, |m| m.inliers.len());
-        let m = ransac(&src, &dst, &grown, 1).expect("a motion");
-        assert!(m.inliers.iter().all(|i| i % 5 != 0), "a wrong match let in");
-        assert!(
-            m.inliers.len() >= right * 9 / 10,
-            "{} of {right}",
-            m.inliers.len()
-        );
-        assert!(
-            fixed < right * 7 / 10,
-            "the fixed gate kept {fixed} of {right}"
-        );
-        let err = (m.transform.translation.vector - t.translation.vector).norm();
-        let rot = m.transform.rotation.angle_to(&t.rotation);
-        // A 3D fit on points this noisy is some centimetres off (6 cm, 0.9° here); the front
-        // end's refinement on the reprojection error makes it accurate.
-        assert!(err < 0.1 && rot < 0.03, "{err} m, {rot} rad");
     }
 }

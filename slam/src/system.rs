@@ -41,7 +41,6 @@ use crate::occupancy::{DepthImage, OccupancyConfig, depth_cloud};
 use crate::optimize::{Kernel, Options, Report, optimize};
 use crate::place::PlaceIndex;
 use crate::posegraph::{Edge, Graph, Pose, vertex_id};
-use crate::rigid::RansacConfig;
 use crate::trajectory::Stamped;
 
 /// SLAM settings.
@@ -118,11 +117,6 @@ pub struct SlamConfig {
     /// Guided matching while relocalising searches this far around a point's predicted
     /// position, pixels (the prediction is poorer than while tracking).
     pub relocalisation_search_px: f32,
-    /// While lost, RANSAC's inlier gate grows with the square of the depth beyond this, metres
-    /// ([`RansacConfig::inlier_growth_from_m`]): a drone lost facing a room's far wall at the
-    /// end of the depth's range had 30–68 matches with its own last keyframe and "no consistent
-    /// motion" under the fixed gate. `None`: the tracking's gate.
-    pub relocalisation_inlier_growth_from_m: Option<f64>,
     /// Standard deviation of an unrefined registration with 100 inliers: metres and radians.
     pub link_sigma: (f64, f64),
     /// A refined registration's information is its Hessian times this (matching errors are not
@@ -192,7 +186,6 @@ impl Default for SlamConfig {
             relocalisation_min_inliers: 25,
             relocalisation_min_inliers_unpredicted: 60,
             relocalisation_search_px: 60.0,
-            relocalisation_inlier_growth_from_m: Some(2.0),
             link_sigma: (0.01, 0.5f64.to_radians()),
             link_information_scale: 0.05,
             link_max_sigma: (0.1, 3f64.to_radians()),
@@ -1123,14 +1116,6 @@ impl Slam {
             let around = predicted.unwrap_or(last_pose);
             let wide = FrontendConfig {
                 search_radius_px: self.config.relocalisation_search_px,
-                ransac: RansacConfig {
-                    inlier_growth_from_m: if tracking {
-                        frontend.ransac.inlier_growth_from_m
-                    } else {
-                        self.config.relocalisation_inlier_growth_from_m
-                    },
-                    ..frontend.ransac.clone()
-                },
                 ..frontend.clone()
             };
             // A vehicle with nothing to check a match against needs a stronger one.
