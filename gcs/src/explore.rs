@@ -207,6 +207,8 @@ pub struct DroneSummary {
     pub flight_pose_error_m: Option<f64>,
     /// Camera frames the SLAM could not track.
     pub lost_frames: usize,
+    /// Of those, frames whose motion visual odometry measured (the drone flew on it).
+    pub odometry_frames: usize,
     /// Wall collisions.
     pub collisions: u32,
     /// The phase it ended in.
@@ -652,6 +654,7 @@ fn watch(
                     flight_pose_error_m: (flight_error[k].1 > 0)
                         .then(|| (flight_error[k].0 / flight_error[k].1 as f64).sqrt()),
                     lost_frames: perception.slam.estimate(k).map_or(0, |e| e.lost_frames),
+                    odometry_frames: perception.slam.estimate(k).map_or(0, |e| e.odometry_frames),
                     collisions: collisions[k],
                     final_phase: report.drones[k].phase.name(),
                     rc_frames: rc.get(k).and_then(Option::as_ref).map(|r| r.frames),

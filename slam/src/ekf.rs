@@ -60,6 +60,8 @@ pub struct EkfConfig {
     pub heading_sigma: f64,
     /// Rangefinder height noise (1 σ), metres.
     pub height_sigma: f64,
+    /// Noise of the mean velocity visual odometry measures between two frames (1 σ), m/s.
+    pub odometry_velocity_sigma: f64,
     /// Attitude (roll, pitch) noise of the flight controller's estimate, radians.
     pub attitude_sigma: f64,
     /// Measurements whose normalised innovation² exceeds this are outliers (a yaw spike, a
@@ -93,6 +95,7 @@ impl Default for EkfConfig {
             slam_yaw_sigma: 1.5f64.to_radians(),
             heading_sigma: 1f64.to_radians(),
             height_sigma: 0.03,
+            odometry_velocity_sigma: 0.1,
             attitude_sigma: 1f64.to_radians(),
             gate_chi2: 16.0,
             max_position_sigma: 0.35,
@@ -190,6 +193,11 @@ enum Op {
         roll: f64,
         pitch: f64,
     },
+    Odometry {
+        since: f64,
+        t: f64,
+        displacement: [f64; 2],
+    },
 }
 
 /// A journal entry: the call, and after a prediction the filter as it then was (its journal
@@ -260,31 +268,31 @@ impl Ekf {
         }
     }
 
-    /// Makes a call again (replaying).
-    fn apply(&mut self, op: Op) {
+    /// Makes a call again (replaying); what a measurement did.
+    fn apply(&mut self, op: Op) -> Option<Update> {
         match op {
             Op::Predict(t) => self.predict(t),
             Op::Input(i) => self.set_input(i),
-            Op::Slam { t, position, yaw } => {
-                self.update_slam(t, position, yaw);
-            }
-            Op::Heading { t, yaw } => {
-                self.update_heading(t, yaw);
-            }
-            Op::Height { t, height } => {
-                self.update_height(t, height);
-            }
+            Op::Slam { t, position, yaw } => return Some(self.update_slam(t, position, yaw)),
+            Op::Heading { t, yaw } => return Some(self.update_heading(t, yaw)),
+            Op::Height { t, height } => return Some(self.update_height(t, height)),
             Op::Attitude { t, roll, pitch } => {
-                self.update_attitude(t, roll, pitch);
+                return Some(self.update_attitude(t, roll, pitch));
             }
+            Op::Odometry {
+                since,
+                t,
+                displacement,
+            } => return Some(self.update_odometry(since, t, displacement)),
         }
+        None
     }
 
-    /// A SLAM fix older than the state: back to the filter as it was at the fix's time, the
-    /// fix applied there, then every later call replayed (a fix 0.3 s late corrects the past
-    /// it measured, and the prediction carries the correction forward with the covariance it
-    /// should have). `None` when the journal does not reach back that far.
-    fn replay_with_fix(&mut self, t: f64, position: [f64; 3], yaw: f64) -> Option<Update> {
+    /// A measurement older than the state (taken at `t`): back to the filter as it was then,
+    /// the measurement applied there, then every later call replayed (a SLAM fix 0.3 s late
+    /// corrects the past it measured, and the prediction carries the correction forward with
+    /// the covariance it should have). `None` when the journal does not reach back that far.
+    fn replay_with(&mut self, t: f64, measurement: Op) -> Option<Update> {
         let i = self
             .journal
             .iter()
@@ -298,7 +306,7 @@ impl Ekf {
         self.replaying = true;
         self.predict(t);
         let before = self.outliers;
-        let update = self.update_slam(t, position, yaw);
+        let update = self.apply(measurement).unwrap_or(Update::Ignored);
         let refused = self.outliers - before;
         for op in later {
             self.apply(op);
@@ -520,7 +528,7 @@ impl Ekf {
     pub fn update_slam(&mut self, t: f64, position: [f64; 3], yaw: f64) -> Update {
         if !self.replaying
             && t < self.t - 1e-6
-            && let Some(update) = self.replay_with_fix(t, position, yaw)
+            && let Some(update) = self.replay_with(t, Op::Slam { t, position, yaw })
         {
             return update;
         }
@@ -599,6 +607,42 @@ impl Ekf {
             self.fixed = true;
         }
         u
+    }
+
+    /// Visual odometry while the SLAM cannot place the vehicle: between times `since` and `t`
+    /// its body moved `displacement` (forward, left; metres, in the body's frame at `since`).
+    /// Taken as the mean horizontal velocity over the interval, at its middle: it keeps the
+    /// position from drifting on the model alone, but does not fix it (its uncertainty still
+    /// grows, slowly). A measurement older than the state is applied where it belongs.
+    pub fn update_odometry(&mut self, since: f64, t: f64, displacement: [f64; 2]) -> Update {
+        let dt = t - since;
+        if !(dt > 1e-3 && dt.is_finite() && displacement.iter().all(|d| d.is_finite())) {
+            return Update::Ignored;
+        }
+        let mid = since + 0.5 * dt;
+        let op = Op::Odometry {
+            since,
+            t,
+            displacement,
+        };
+        if !self.replaying
+            && mid < self.t - 1e-6
+            && let Some(update) = self.replay_with(mid, op)
+        {
+            return update;
+        }
+        let update = match self.state_at(since) {
+            Some(then) => {
+                let (s, c) = then[YAW].sin_cos();
+                let [forward, left] = displacement;
+                let velocity = [(c * forward - s * left) / dt, (s * forward + c * left) / dt];
+                let r = self.config.odometry_velocity_sigma.powi(2);
+                self.update(mid, [VX, VX + 1], velocity, [r, r], [false, false], false)
+            }
+            None => Update::Ignored,
+        };
+        self.record(op);
+        update
     }
 
     /// The IMU heading.
@@ -700,6 +744,55 @@ mod tests {
         assert!(err < 0.02, "{err}");
         let v_err = (e.velocity[0] - truth.x[VX]).hypot(e.velocity[1] - truth.x[VX + 1]);
         assert!(v_err < 0.1, "velocity {v_err}");
+    }
+
+    #[test]
+    fn visual_odometry_keeps_a_drifting_vehicle_placed_without_fixes() {
+        // Hovering with sticks centred, a draught carries the vehicle at 0.3 m/s (the model
+        // knows nothing of it) for 20 s after its last SLAM fix. Visual odometry between
+        // frames 0.1 s apart (1 cm of noise each, processed 0.3 s late) keeps the estimate
+        // valid and on the vehicle; without it the filter gives the pose up within seconds.
+        let config = EkfConfig::default();
+        let yaw = 0.7;
+        let wind = [0.24, -0.18];
+        let truth = |t: f64| [wind[0] * t, wind[1] * t];
+        let run = |odometry: bool| {
+            let mut ekf = Ekf::new(config.clone(), 0.0, [0.0, 0.0, 0.9], yaw);
+            ekf.update_slam(0.0, [0.0, 0.0, 0.9], yaw);
+            let mut worst: f64 = 0.0;
+            let mut valid_until = 0.0;
+            for step in 1..=200 {
+                let t = f64::from(step) * 0.1;
+                ekf.predict(t);
+                ekf.update_heading(t, yaw);
+                ekf.update_height(t, 0.9);
+                if odometry && t >= 0.4 {
+                    let (since, until) = (t - 0.4, t - 0.3);
+                    let (a, b) = (truth(since), truth(until));
+                    // Zero-mean noise of up to 1 cm per frame, uncorrelated in x and y.
+                    let noise = |phase: f64| 0.01 * (f64::from(step) * 2.39 + phase).sin();
+                    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+                    let (s, c) = yaw.sin_cos();
+                    let displacement =
+                        [c * dx + s * dy + noise(0.0), -s * dx + c * dy + noise(1.3)];
+                    ekf.update_odometry(since, until, displacement);
+                }
+                if let Some(e) = ekf.valid_estimate() {
+                    valid_until = t;
+                    let p = truth(t);
+                    worst = worst.max((e.position[0] - p[0]).hypot(e.position[1] - p[1]));
+                }
+            }
+            (valid_until, worst)
+        };
+        let (valid_until, worst) = run(true);
+        assert!(valid_until > 19.9, "given up at {valid_until:.1} s");
+        assert!(worst < 0.15, "{worst:.3} m off");
+        let (valid_until, _) = run(false);
+        assert!(
+            valid_until < 5.0,
+            "valid until {valid_until:.1} s on the model alone"
+        );
     }
 
     #[test]

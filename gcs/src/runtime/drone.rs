@@ -6,6 +6,7 @@ use std::sync::Arc;
 use std::sync::mpsc::{Receiver, TryRecvError, channel};
 
 use link::{Command, CommandError, FlightMode, LinkState, Sticks, VehicleLink};
+use nalgebra::Isometry3;
 use nav::Grid;
 use nav::avoid::{KeepClear, keep_clear};
 use nav::control::{PidGains, Pose3, PositionController, PositionGains};
@@ -103,17 +104,18 @@ pub struct DroneConfig {
     pub stuck_s: f64,
     /// A look around on the spot takes this long, seconds.
     pub scan_s: f64,
-    /// Yaw stick while hovering without a pose (a slow turn so the camera finds known views).
+    /// Yaw stick while the SLAM has lost the drone and the turn back found nothing (a slow turn
+    /// so the camera finds known views).
     pub blind_yaw: f32,
     /// A drone the SLAM loses goes back to where its last keyframe was taken, facing the way it
     /// faced then, if that is within this distance (the camera sees what the keyframe saw;
     /// where it was lost it may be too near a wall, or see only what is beyond the depth's
     /// range), else it stops where it was lost, metres.
     pub lost_back_m: f64,
-    /// Without a pose, turn back to the heading of the last SLAM keyframe for this long first,
-    /// seconds.
+    /// Lost by the SLAM, turn back to the heading of the last SLAM keyframe for this long
+    /// first, seconds.
     pub blind_turn_back_s: f64,
-    /// Land after this long without a valid pose, seconds.
+    /// Land after this long lost by the SLAM (on visual odometry, or blind), seconds.
     pub blind_land_s: f64,
     /// Return to the start and land below this battery charge, percent.
     pub low_battery_pct: u8,
@@ -254,6 +256,8 @@ pub struct Drone {
     /// Where the filter had the drone when the SLAM lost it (while the filter still carries
     /// the pose).
     lost_at: Option<[f64; 2]>,
+    /// Since when (the frame's time) the SLAM has not placed it.
+    lost_since: Option<f64>,
     /// Since when the vehicle has reported itself disarmed while the station flew it.
     disarmed_since: Option<f64>,
     /// Mission time of its last camera frame (none yet: no camera is watched).
@@ -316,6 +320,7 @@ impl Drone {
             keyframe_yaw: None,
             keyframe_at: None,
             lost_at: None,
+            lost_since: None,
             last_frame: None,
             disarmed_since: None,
             landing_since: None,
@@ -516,6 +521,7 @@ impl Drone {
         );
         if used {
             self.lost_at = None;
+            self.lost_since = None;
         }
         if used && keyframe {
             self.keyframe_yaw = Some(yaw);
@@ -524,13 +530,14 @@ impl Drone {
         }
     }
 
-    /// The SLAM could not place a frame of this drone: it goes back to where its last keyframe
-    /// was taken, if that is within `config.lost_back_m`, else it stops where it is; a look
-    /// around it was flying ends once it is found again.
-    pub fn slam_lost(&mut self, config: &DroneConfig) {
+    /// The SLAM could not place this drone's frame taken at `stamp`: it goes back to where its
+    /// last keyframe was taken, if that is within `config.lost_back_m`, else it stops where it
+    /// is; a look around it was flying ends once it is found again.
+    pub fn slam_lost(&mut self, stamp: f64, config: &DroneConfig) {
         if let Some(scan) = &mut self.scan {
             scan.cut = true;
         }
+        self.lost_since.get_or_insert(stamp);
         if self.lost_at.is_some() {
             return;
         }
@@ -538,6 +545,14 @@ impl Drone {
             Some(k) if (k[0] - p[0]).hypot(k[1] - p[1]) <= config.lost_back_m => k,
             _ => [p[0], p[1]],
         });
+    }
+
+    /// Visual odometry while lost: the body moved `previous_from_body` between its frames at
+    /// `since` and `stamp`. The filter flies on it (holding where the SLAM lost the drone,
+    /// going back to the last keyframe) instead of on its model alone.
+    pub fn slam_odometry(&mut self, since: f64, stamp: f64, previous_from_body: &Isometry3<f64>) {
+        let d = previous_from_body.translation.vector;
+        self.ekf.update_odometry(since, stamp, [d.x, d.y]);
     }
 
     /// The filter's roll and pitch (radians): the attitude the vehicle reports, else what the
@@ -695,13 +710,25 @@ impl Drone {
         let lost = self
             .lost_at
             .filter(|_| matches!(self.phase, Phase::Exploring | Phase::Returning));
+        let lost_for = self.lost_since.map_or(0.0, |since| now - since);
+        if lost.is_some() && lost_for > config.blind_land_s {
+            self.say(format!(
+                "the map lost for {:.0} s: landing where it is",
+                config.blind_land_s
+            ));
+            self.land();
+            return None;
+        }
+        // Past the turn back, a slow sweep round on the spot over every other view.
+        let sweep = lost.is_some() && lost_for > config.blind_turn_back_s;
         if let Some(at) = lost {
-            // The SLAM lost it, the filter still carries the pose: stop where that happened
-            // (not on along the path, out of what the camera knew) and face where the last
-            // keyframe was taken, so the camera sees the map again.
+            // The SLAM lost it, the filter still carries the pose (on visual odometry while
+            // the camera sees enough, else on its model for a few seconds): stop where that
+            // happened (not on along the path, out of what the camera knew) and face where
+            // the last keyframe was taken, so the camera sees the map again.
             self.hold = at;
             if let Some(yaw) = self.keyframe_yaw {
-                self.yaw_goal = yaw;
+                self.yaw_goal = if sweep { pose[3] } else { yaw };
             }
             self.progress = (now, here);
         }
@@ -752,6 +779,9 @@ impl Drone {
         {
             (c.roll, c.pitch) = (0.0, 0.0);
         }
+        if sweep {
+            c.yaw = f64::from(config.blind_yaw);
+        }
         self.set_sticks(Sticks {
             roll: c.roll as f32,
             pitch: c.pitch as f32,
@@ -771,7 +801,10 @@ impl Drone {
         height: Option<f32>,
         heading: Option<f64>,
     ) -> Option<DroneEvent> {
-        let since = *self.blind_since.get_or_insert(now);
+        // Blind since the SLAM lost it, if it flew on visual odometry in between.
+        let since = *self
+            .blind_since
+            .get_or_insert(self.lost_since.map_or(now, |lost| lost.min(now)));
         if now - since > config.blind_land_s {
             self.say(format!(
                 "no pose for {:.0} s: landing where it is",
@@ -1157,6 +1190,59 @@ mod tests {
     }
 
     #[test]
+    fn a_lost_drone_flies_on_visual_odometry_turns_back_sweeps_then_lands() {
+        let config = DroneConfig::default();
+        let mut drone = exploring_drone(Arc::default(), &config);
+        drone.set_plan(Some([5.0, 0.0]), vec![[0.0, 0.0], [5.0, 0.0]], 0.0);
+        drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.5, true);
+        drone.slam_fix(0.2, [0.05, 0.0, 0.9], 0.0, false);
+        drone.tick(0.2, &config);
+        // Lost at 0.3 s; its camera's consecutive frames say it is not moving.
+        let mut t: f64 = 0.3;
+        drone.slam_lost(t, &config);
+        let mut turned_back = false;
+        while t < 0.3 + config.blind_land_s - 0.5 {
+            t += 0.1;
+            drone.slam_lost(t, &config);
+            drone.slam_odometry(t - 0.1, t, &Isometry3::identity());
+            drone.tick(t, &config);
+            let pose = drone
+                .pose()
+                .expect("flying on odometry, the pose stays valid");
+            assert!(
+                pose[0].hypot(pose[1]) < 0.2,
+                "held near the keyframe: {pose:?}"
+            );
+            assert_eq!(drone.hold, [0.0, 0.0], "back at the last keyframe");
+            let s = drone.sticks.expect("sticks");
+            if t < 0.3 + config.blind_turn_back_s - 0.1 {
+                turned_back |= (drone.yaw_goal - 0.5).abs() < 1e-9;
+            } else if t > 0.3 + config.blind_turn_back_s + 0.1 {
+                assert_eq!(s.yaw, config.blind_yaw, "the slow sweep at {t:.1} s");
+            }
+            assert_eq!(drone.phase, Phase::Exploring);
+        }
+        assert!(turned_back, "first faced the last keyframe's way");
+        while t < 0.3 + config.blind_land_s + 0.5 {
+            t += 0.1;
+            drone.slam_lost(t, &config);
+            drone.slam_odometry(t - 0.1, t, &Isometry3::identity());
+            drone.tick(t, &config);
+        }
+        assert_eq!(drone.phase, Phase::Landing, "lost for too long");
+        // Without odometry the same loss leaves no pose within seconds.
+        let mut drone = exploring_drone(Arc::default(), &config);
+        drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.5, true);
+        drone.slam_lost(0.2, &config);
+        let mut t = 0.2;
+        while drone.pose().is_some() {
+            t += 0.1;
+            drone.tick(t, &config);
+            assert!(t < 5.0, "a pose without fixes or odometry must expire");
+        }
+    }
+
+    #[test]
     fn a_drone_the_slam_loses_goes_back_to_its_last_keyframe_facing_its_way() {
         let config = DroneConfig::default();
         // Following a path east: a keyframe at `keyframe_x` facing north-east, then a fix at
@@ -1169,7 +1255,7 @@ mod tests {
             drone.tick(0.2, &config);
             assert!(drone.sticks.expect("sticks").pitch > 0.0, "on its way");
             let where_lost = drone.pose().expect("pose");
-            drone.slam_lost(&config);
+            drone.slam_lost(0.2, &config);
             // The filter still carries the pose: hold, facing the last keyframe's way, the
             // goal kept.
             let mut t = 0.2;
@@ -1211,7 +1297,7 @@ mod tests {
         }
         assert!(drone.yaw_goal > 1.0, "turning: {}", drone.yaw_goal);
         // Lost: it turns back to the last keyframe's heading, not on with the look around…
-        drone.slam_lost(&config);
+        drone.slam_lost(t, &config);
         for _ in 0..5 {
             t += 0.1;
             assert_eq!(drone.tick(t, &config), None);

@@ -443,7 +443,10 @@ impl Mission {
                         let x = pose.rotation * nalgebra::Vector3::x();
                         d.slam_fix(fix.stamp, [v.x, v.y, v.z], x.y.atan2(x.x), fix.keyframe);
                     } else {
-                        d.slam_lost(&self.config.drone);
+                        d.slam_lost(fix.stamp, &self.config.drone);
+                        if let Some(o) = fix.odometry {
+                            d.slam_odometry(o.since, fix.stamp, &o.previous_from_body);
+                        }
                     }
                 }
             }

@@ -13,7 +13,7 @@ use std::time::Duration;
 use link::camera::RgbdFrame;
 use nalgebra::Isometry3;
 use slam::livemap::MapHandle;
-use slam::system::{Frame, RobotEstimate, Slam, SlamStats, Tracking};
+use slam::system::{Frame, Odometry, RobotEstimate, Slam, SlamStats, Tracking};
 use slam::trajectory::Stamped;
 
 use crate::record::{Record, Recorder};
@@ -120,6 +120,8 @@ pub struct SlamFix {
     /// Matches that agreed with the frame's pose when it was tracked (how much of the map the
     /// camera sees: few, and the next frame may be lost); `None` when relocalised or lost.
     pub inliers: Option<usize>,
+    /// While lost: how the body moved since the drone's previous frame (visual odometry).
+    pub odometry: Option<Odometry>,
 }
 
 /// The SLAM's state for displays.
@@ -320,6 +322,7 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
                 Tracking::Tracked { inliers } => Some(inliers),
                 _ => None,
             },
+            odometry: report.odometry,
         });
         let processed = count.fetch_add(1, Ordering::Relaxed) + 1;
         let published = SlamView {
