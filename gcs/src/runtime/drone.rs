@@ -713,7 +713,7 @@ impl Drone {
         let lost_for = self.lost_since.map_or(0.0, |since| now - since);
         if lost.is_some() && lost_for > config.blind_land_s {
             self.say(format!(
-                "the map lost for {:.0} s: landing where it is",
+                "lost by the SLAM for {:.0} s: landing where it is",
                 config.blind_land_s
             ));
             self.land();
