@@ -2172,6 +2172,17 @@ mod tests {
         }
     }
 
+    /// A deterministic stream of random 64-bit words (Knuth's MMIX LCG) from `seed`, for
+    /// descriptors.
+    fn random_bits(mut seed: u64) -> impl FnMut() -> u64 {
+        move || {
+            seed = seed
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            seed
+        }
+    }
+
     /// What a camera at `map_from_camera` sees of `scene` (map points with their
     /// descriptors): each point in its optical frame, its keypoint the point's projection.
     fn seen(scene: &[(Point3<f64>, Descriptor)], map_from_camera: &Isometry3<f64>) -> Observation {
@@ -2210,13 +2221,7 @@ mod tests {
         // too few to register on A alone, enough on A's local map, which holds B's points
         // moved into A's camera. Keyframes looking back, in another map frame or far away are
         // left out.
-        let mut seed = 7u64;
-        let mut bits = || {
-            seed = seed
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            seed
-        };
+        let mut bits = random_bits(7);
         // Camera optical axes along the map's x (looking "ahead"), y to the right is -y map.
         let look = |x: f64, y: f64| {
             Isometry3::from_parts(
@@ -2300,13 +2305,7 @@ mod tests {
         // A vehicle's camera looking along its body's x at a textured wall 2–3 m ahead; it is
         // lost (the map cannot place it). Between two frames 0.1 s apart its body moved 4 cm
         // forward and 3 cm left and turned 3° anticlockwise.
-        let mut seed = 11u64;
-        let mut bits = || {
-            seed = seed
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            seed
-        };
+        let mut bits = random_bits(11);
         let body_from_camera = Isometry3::from_parts(
             Translation3::new(0.1, 0.0, 0.05),
             UnitQuaternion::from_matrix(&nalgebra::Matrix3::new(
