@@ -512,11 +512,18 @@ impl Drone {
             .map(|e| [e.position[0], e.position[1], e.position[2], e.attitude[2]])
     }
 
-    /// A SLAM pose of the body (position, heading) taken at `stamp`; `keyframe`: its frame
-    /// became a keyframe.
-    pub fn slam_fix(&mut self, stamp: f64, position: [f64; 3], yaw: f64, keyframe: bool) {
+    /// A SLAM pose of the body (position, heading) taken at `stamp`, registered on `inliers`
+    /// matches if tracked (`None`: relocalised); `keyframe`: its frame became a keyframe.
+    pub fn slam_fix(
+        &mut self,
+        stamp: f64,
+        position: [f64; 3],
+        yaw: f64,
+        inliers: Option<usize>,
+        keyframe: bool,
+    ) {
         let used = matches!(
-            self.ekf.update_slam(stamp, position, yaw),
+            self.ekf.update_slam_on(stamp, position, yaw, inliers),
             Update::Applied | Update::Corrected
         );
         if used {
@@ -1110,11 +1117,11 @@ mod tests {
         let mut drone = exploring_drone(Arc::default(), &config);
         // Facing +x, the path north: a turn on the spot.
         drone.set_plan(Some([0.0, 3.0]), vec![[0.0, 0.0], [0.0, 3.0]], 0.0);
-        drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.0, false);
+        drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.0, None, false);
         drone.tick(0.1, &config);
         assert_eq!(drone.hold, [0.0, 0.0]);
         // Coasting north along the path while it turns: held back, not carried along.
-        drone.slam_fix(0.2, [0.0, 0.3, 0.9], 0.3, false);
+        drone.slam_fix(0.2, [0.0, 0.3, 0.9], 0.3, None, false);
         drone.tick(0.2, &config);
         assert_eq!(
             drone.hold,
@@ -1128,7 +1135,13 @@ mod tests {
             "back to where the turn began: {s:?}"
         );
         // Turned: on along the path, the carrot ahead of the drone.
-        drone.slam_fix(0.3, [0.0, 0.3, 0.9], std::f64::consts::FRAC_PI_2, false);
+        drone.slam_fix(
+            0.3,
+            [0.0, 0.3, 0.9],
+            std::f64::consts::FRAC_PI_2,
+            None,
+            false,
+        );
         drone.tick(0.3, &config);
         assert!(drone.hold[1] > 0.5, "{:?}", drone.hold);
     }
@@ -1145,7 +1158,7 @@ mod tests {
         for _ in 0..20 {
             t += 0.1;
             set_yaw(0.0);
-            drone.slam_fix(t, [0.0, 0.0, 0.9], 0.0, true);
+            drone.slam_fix(t, [0.0, 0.0, 0.9], 0.0, None, true);
             drone.tick(t, &config);
         }
         for i in 1..=10 {
@@ -1153,7 +1166,7 @@ mod tests {
             let yaw = 0.1 * f64::from(i);
             set_yaw(yaw);
             if i <= 5 {
-                drone.slam_fix(t, [0.0, 0.0, 0.9], yaw, false);
+                drone.slam_fix(t, [0.0, 0.0, 0.9], yaw, None, false);
             }
             drone.tick(t, &config);
         }
@@ -1194,8 +1207,8 @@ mod tests {
         let config = DroneConfig::default();
         let mut drone = exploring_drone(Arc::default(), &config);
         drone.set_plan(Some([5.0, 0.0]), vec![[0.0, 0.0], [5.0, 0.0]], 0.0);
-        drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.5, true);
-        drone.slam_fix(0.2, [0.05, 0.0, 0.9], 0.0, false);
+        drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.5, None, true);
+        drone.slam_fix(0.2, [0.05, 0.0, 0.9], 0.0, None, false);
         drone.tick(0.2, &config);
         // Lost at 0.3 s; its camera's consecutive frames say it is not moving.
         let mut t: f64 = 0.3;
@@ -1232,7 +1245,7 @@ mod tests {
         assert_eq!(drone.phase, Phase::Landing, "lost for too long");
         // Without odometry the same loss leaves no pose within seconds.
         let mut drone = exploring_drone(Arc::default(), &config);
-        drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.5, true);
+        drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.5, None, true);
         drone.slam_lost(0.2, &config);
         let mut t = 0.2;
         while drone.pose().is_some() {
@@ -1250,8 +1263,8 @@ mod tests {
         let lost_after_keyframe_at = |keyframe_x: f64| {
             let mut drone = exploring_drone(Arc::default(), &config);
             drone.set_plan(Some([5.0, 0.0]), vec![[0.0, 0.0], [5.0, 0.0]], 0.0);
-            drone.slam_fix(0.1, [keyframe_x, 0.0, 0.9], 0.5, true);
-            drone.slam_fix(0.2, [0.1, 0.0, 0.9], 0.0, false);
+            drone.slam_fix(0.1, [keyframe_x, 0.0, 0.9], 0.5, None, true);
+            drone.slam_fix(0.2, [0.1, 0.0, 0.9], 0.0, None, false);
             drone.tick(0.2, &config);
             assert!(drone.sticks.expect("sticks").pitch > 0.0, "on its way");
             let where_lost = drone.pose().expect("pose");
@@ -1272,7 +1285,7 @@ mod tests {
         let (mut drone, where_lost, t) = lost_after_keyframe_at(0.0);
         assert_eq!(drone.hold, [0.0, 0.0]);
         // Found again: on along the path.
-        drone.slam_fix(t, [0.1, 0.0, 0.9], 0.0, false);
+        drone.slam_fix(t, [0.1, 0.0, 0.9], 0.0, None, false);
         drone.tick(t + 0.1, &config);
         assert!(drone.hold[0] > where_lost[0] + 0.1, "{:?}", drone.hold);
         // The keyframe further back than `lost_back_m`: where the SLAM lost it.
@@ -1292,7 +1305,7 @@ mod tests {
         while t < 2.0 {
             t += 0.1;
             yaw += 0.06;
-            drone.slam_fix(t, [0.0, 0.0, 0.9], yaw, true);
+            drone.slam_fix(t, [0.0, 0.0, 0.9], yaw, None, true);
             assert_eq!(drone.tick(t, &config), None);
         }
         assert!(drone.yaw_goal > 1.0, "turning: {}", drone.yaw_goal);
@@ -1308,7 +1321,7 @@ mod tests {
         let mut event = None;
         while event.is_none() {
             t += 0.1;
-            drone.slam_fix(t, [0.0, 0.0, 0.9], yaw, false);
+            drone.slam_fix(t, [0.0, 0.0, 0.9], yaw, None, false);
             event = drone.tick(t, &config);
             assert!(t < config.scan_s, "the look around went on");
         }

@@ -441,7 +441,13 @@ impl Mission {
                     if let Some(pose) = fix.map_from_body {
                         let v = pose.translation.vector;
                         let x = pose.rotation * nalgebra::Vector3::x();
-                        d.slam_fix(fix.stamp, [v.x, v.y, v.z], x.y.atan2(x.x), fix.keyframe);
+                        d.slam_fix(
+                            fix.stamp,
+                            [v.x, v.y, v.z],
+                            x.y.atan2(x.x),
+                            fix.inliers,
+                            fix.keyframe,
+                        );
                     } else {
                         d.slam_lost(fix.stamp, &self.config.drone);
                         if let Some(o) = fix.odometry {
