@@ -118,7 +118,8 @@ pub struct SlamFix {
     /// The frame became a keyframe: the camera saw enough to build the map on.
     pub keyframe: bool,
     /// Matches that agreed with the frame's pose when it was tracked (how much of the map the
-    /// camera sees: few, and the next frame may be lost); `None` when relocalised or lost.
+    /// camera sees: few, and the next frame may be lost, and its pose counts for less);
+    /// `None` when relocalised, lost or placed at a known pose.
     pub inliers: Option<usize>,
     /// While lost: how the body moved since the drone's previous frame (visual odometry).
     pub odometry: Option<Odometry>,
@@ -319,7 +320,8 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
             map_from_body: estimate.as_ref().and_then(RobotEstimate::map_from_body),
             keyframe: report.keyframe.is_some(),
             inliers: match report.tracking {
-                Tracking::Tracked { inliers } => Some(inliers),
+                // A frame placed at its known pose (`--poses truth`) was not registered: 0.
+                Tracking::Tracked { inliers } if inliers > 0 => Some(inliers),
                 _ => None,
             },
             odometry: report.odometry,
