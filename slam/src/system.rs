@@ -270,6 +270,8 @@ pub enum Tracking {
         /// Inliers of the registration.
         inliers: usize,
     },
+    /// Placed at the pose it came with ([`Frame::known_camera_pose`]), not registered.
+    Known,
     /// Registered again after being lost.
     Relocalised {
         /// The keyframe it was registered against.
@@ -1009,7 +1011,7 @@ impl Slam {
             tracking: if reference.is_none() {
                 Tracking::Started
             } else {
-                Tracking::Tracked { inliers: 0 }
+                Tracking::Known
             },
             keyframe,
             loop_closures: 0,

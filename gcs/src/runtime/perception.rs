@@ -320,8 +320,7 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
             map_from_body: estimate.as_ref().and_then(RobotEstimate::map_from_body),
             keyframe: report.keyframe.is_some(),
             inliers: match report.tracking {
-                // A frame placed at its known pose (`--poses truth`) was not registered: 0.
-                Tracking::Tracked { inliers } if inliers > 0 => Some(inliers),
+                Tracking::Tracked { inliers } => Some(inliers),
                 _ => None,
             },
             odometry: report.odometry,
