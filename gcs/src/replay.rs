@@ -23,7 +23,7 @@ use gcs::outputs;
 use gcs::record::DroneState;
 use gcs::record::Setup;
 use gcs::runtime::RuntimeConfig;
-use gcs::runtime::perception::{SensorSample, slam_frame};
+use gcs::runtime::perception::{STEADY_WINDOW, SensorSample, heading_steady, slam_frame};
 use nav::mission::{PlannerConfig, Strategy};
 
 /// Arguments of `gcs replay`.
@@ -345,9 +345,16 @@ fn planner_configs(setup: &Setup) -> Vec<PlannerConfig> {
 fn sample_at(states: &[DroneState], t: f64) -> Option<SensorSample> {
     let i = states.partition_point(|s| s.t <= t).checked_sub(1)?;
     let s = &states[i];
+    let heading = s.yaw_rad.map(f64::from);
+    let near = &states[states.partition_point(|o| o.t < s.t - STEADY_WINDOW)
+        ..states.partition_point(|o| o.t <= s.t + STEADY_WINDOW)];
+    let readings = near
+        .iter()
+        .filter_map(|o| o.yaw_rad.map(|h| (o.t, f64::from(h))));
     Some(SensorSample {
         t: s.t,
-        heading: s.yaw_rad.map(f64::from),
+        heading,
+        heading_steady: heading.is_some() && heading_steady(readings, s.t),
         height: s.height_m.map(f64::from),
         tilt: s.tilt,
         body: s.pose,

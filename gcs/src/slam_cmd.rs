@@ -176,6 +176,7 @@ fn run_dataset(args: &RunArgs) -> anyhow::Result<()> {
             depth_scale: ds.depth_scale,
             camera: ds.camera,
             heading: None,
+            heading_steady: false,
             height: None,
             tilt: None,
             predicted_body: None,

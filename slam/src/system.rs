@@ -247,6 +247,11 @@ pub struct Frame {
     pub camera: Pinhole,
     /// The body's heading from its IMU, radians (+ anticlockwise), if it has one.
     pub heading: Option<f64>,
+    /// The body was not turning when `heading` was read: only then is the heading a prior on
+    /// the map. A heading read while turning lags the camera (telemetry comes late) and, with
+    /// keyframes taken mostly while turning, biased the map's yaw; relocalisation and the
+    /// loop-closure check use any heading.
+    pub heading_steady: bool,
     /// The body's height above the floor from its rangefinder, metres, if it has one.
     pub height: Option<f64>,
     /// The body's roll and pitch (FLU, radians: right side down, nose down) from its IMU or
@@ -1810,7 +1815,11 @@ impl Slam {
         let mut z = pose;
         let mut info = vec![0.0; 36];
         let mut any = false;
-        if let (Some(psi), Some(sigma)) = (frame.heading, self.config.heading_sigma) {
+        if let (Some(psi), Some(sigma), true) = (
+            frame.heading,
+            self.config.heading_sigma,
+            frame.heading_steady,
+        ) {
             let estimate = body_yaw(&pose, &camera_from_body);
             let d = wrap(psi - estimate);
             if d.abs() < self.config.heading_gate {

@@ -642,6 +642,7 @@ impl Mission {
                 SensorSample {
                     t: now,
                     heading: t.yaw_rad.map(f64::from),
+                    heading_steady: false,
                     height: t.height_m.map(f64::from),
                     tilt: Some(d.tilt()),
                     body: d.pose(),
