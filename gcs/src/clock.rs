@@ -1,7 +1,10 @@
 //! The mission's clock: wall time for real vehicles, the simulator's time for simulated ones
 //! (whose timeouts and rates count simulated seconds, however fast the simulation runs).
 
-use std::time::Instant;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use link::VehicleClock;
 
 /// Seconds since the mission's epoch, from any thread.
 pub trait Clock: Send + Sync {
@@ -46,4 +49,13 @@ impl Clock for SimulatedClock {
     fn speed(&self) -> f64 {
         self.speed
     }
+}
+
+/// The mission's `clock` as a link's clock: the link's heartbeat timeouts and rates count it,
+/// and the times it stamps on telemetry ([`link::Telemetry::heading_at`]) are mission times.
+pub fn link_clock(clock: &Arc<dyn Clock>) -> VehicleClock {
+    let mission = clock.clone();
+    VehicleClock::new(clock.speed(), move || {
+        Duration::try_from_secs_f64(mission.now()).unwrap_or_default()
+    })
 }

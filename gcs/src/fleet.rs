@@ -14,7 +14,7 @@ use nalgebra::Isometry3;
 use sitl::{Camera, EndpointSpec, Protocol, SimConfig, Sitl, SitlConfig, VehicleParams, World};
 use slam::system::RobotSetup;
 
-use crate::clock::{Clock, SimulatedClock};
+use crate::clock::{Clock, SimulatedClock, link_clock};
 use crate::runtime::drone::{DroneSpec, StartSequence};
 use crate::runtime::perception::CameraFrame;
 
@@ -127,11 +127,10 @@ impl SimFleet {
                 .tlog_dir
                 .as_ref()
                 .map(|d| d.join(format!("drone{}.tlog", k + 1)));
-            let sim_clock = sitl.clock();
             let link = connect(
                 config.link,
                 &format!("tcpout:127.0.0.1:{port}"),
-                VehicleClock::new(config.speed, move || sim_clock.now()),
+                link_clock(&clock),
                 LinkOptions {
                     tlog,
                     ..LinkOptions::default()

@@ -15,11 +15,10 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use clap::Args;
-use link::VehicleClock;
 use link::camera::RgbdFrame;
 use slam::system::{RobotSetup, Slam, SlamConfig};
 
-use gcs::clock::{Clock, WallClock};
+use gcs::clock::{Clock, WallClock, link_clock};
 use gcs::fleet::{LinkKind, LinkOptions, connect, sim_body_from_camera};
 use gcs::fleet_file::{self, Vehicle};
 use gcs::gui::Station;
@@ -122,7 +121,7 @@ pub fn run_with(args: &FlyArgs, window: Option<Window>) -> anyhow::Result<()> {
         let link = connect(
             v.kind,
             &v.address,
-            VehicleClock::wall(),
+            link_clock(&clock),
             LinkOptions {
                 tlog,
                 channel_map: v.channels,

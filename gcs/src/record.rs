@@ -94,6 +94,10 @@ pub struct DroneState {
     pub height_m: Option<f32>,
     /// IMU heading, radians.
     pub yaw_rad: Option<f32>,
+    /// When the heading arrived, mission clock, seconds (absent from older logs, and for a
+    /// link that does not stamp it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub heading_t: Option<f64>,
     /// Roll, pitch, yaw from the flight controller, radians.
     pub attitude: Option<[f32; 3]>,
     /// Battery voltage, volts.
@@ -622,6 +626,7 @@ fn write_record(w: &mut McapWriter, ch: &mut Channels, r: &Record) -> Result<u64
                 phase: (*phase).into(),
                 height_m: telemetry.height_m,
                 yaw_rad: telemetry.yaw_rad,
+                heading_t: telemetry.heading_at.map(|at| at.as_secs_f64()),
                 attitude: telemetry.attitude.map(|a| [a.roll, a.pitch, a.yaw]),
                 battery_v: telemetry.battery.map(|b| b.voltage_v),
                 battery_pct: telemetry.battery.and_then(|b| b.remaining_pct),

@@ -23,7 +23,7 @@ use gcs::outputs;
 use gcs::record::DroneState;
 use gcs::record::Setup;
 use gcs::runtime::RuntimeConfig;
-use gcs::runtime::perception::{STEADY_WINDOW, SensorSample, heading_steady, slam_frame};
+use gcs::runtime::perception::{SensorSample, sensors_at, slam_frame};
 use nav::mission::{PlannerConfig, Strategy};
 
 /// Arguments of `gcs replay`.
@@ -219,6 +219,11 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<()> {
     let mut plans = log.plans.iter().peekable();
     let mut navigation = NavigationTally::default();
     let mut body_tracks: Vec<Vec<(f64, [f64; 2])>> = vec![vec![]; n];
+    let samples: Vec<Vec<SensorSample>> = log
+        .states
+        .iter()
+        .map(|states| states.iter().map(sensor_sample).collect())
+        .collect();
     for (i, f) in log.frames.iter().enumerate() {
         // The decisions made before this frame, on the map of the frames before it.
         if plans.peek().is_some_and(|p| p.t < f.stamp) {
@@ -230,8 +235,8 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<()> {
         if f.drone >= n {
             continue;
         }
-        let sample = sample_at(&log.states[f.drone], f.stamp);
-        let Some(frame) = slam_frame(f, sample, args.truth_poses) else {
+        let sensors = samples.get(f.drone).and_then(|s| sensors_at(s, f.stamp));
+        let Some(frame) = slam_frame(f, sensors, args.truth_poses) else {
             continue;
         };
         if let Err(e) = slam.process(frame) {
@@ -341,24 +346,16 @@ fn planner_configs(setup: &Setup) -> Vec<PlannerConfig> {
         .collect()
 }
 
-/// The latest sample of a drone's state at or before `t`.
-fn sample_at(states: &[DroneState], t: f64) -> Option<SensorSample> {
-    let i = states.partition_point(|s| s.t <= t).checked_sub(1)?;
-    let s = &states[i];
-    let heading = s.yaw_rad.map(f64::from);
-    let near = &states[states.partition_point(|o| o.t < s.t - STEADY_WINDOW)
-        ..states.partition_point(|o| o.t <= s.t + STEADY_WINDOW)];
-    let readings = near
-        .iter()
-        .filter_map(|o| o.yaw_rad.map(|h| (o.t, f64::from(h))));
-    Some(SensorSample {
+/// A drone's recorded state as the sensor sample the live mission gave its SLAM.
+fn sensor_sample(s: &DroneState) -> SensorSample {
+    SensorSample {
         t: s.t,
-        heading,
-        heading_steady: heading.is_some() && heading_steady(readings, s.t),
+        heading: s.yaw_rad.map(f64::from),
+        heading_t: s.heading_t.map_or(s.t, |h| h.min(s.t)),
         height: s.height_m.map(f64::from),
         tilt: s.tilt,
         body: s.pose,
-    })
+    }
 }
 
 /// Cell-by-cell agreement of two maps, over the cells either knows (`b`'s cells looked up by

@@ -166,6 +166,10 @@ pub struct Telemetry {
     pub attitude: Option<Attitude>,
     /// Heading in radians, + = counter-clockwise (IMU yaw on the shield, attitude yaw on MAVLink).
     pub yaw_rad: Option<f32>,
+    /// When the message that carried `yaw_rad` (and `attitude`) arrived, on the link's
+    /// [`VehicleClock`](crate::VehicleClock): a reader polling at its own rate sees how old the
+    /// heading is (and whether it is new), so a turning vehicle's heading is not taken as now.
+    pub heading_at: Option<Duration>,
     /// Battery.
     pub battery: Option<Battery>,
     /// Position in the map frame (x forward/north, y left/west, z up), metres, where the

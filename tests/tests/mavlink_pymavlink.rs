@@ -4,7 +4,7 @@
 use std::time::Duration;
 
 use link::mavlink::{MavlinkConfig, MavlinkLink, MavlinkVehicle};
-use link::{Command, FlightMode, LinkState, Sticks, Transport, VehicleLink};
+use link::{Command, FlightMode, LinkState, Sticks, Transport, VehicleClock, VehicleLink};
 use serde_json::Value;
 use tests::{PyVehicle, eventually, free_tcp_port};
 
@@ -60,6 +60,13 @@ fn fly(v: &MavlinkVehicle) {
     );
     assert_eq!(t.position_m, Some([2.0, -1.0, 1.5]));
     assert_eq!(t.mode.as_deref(), Some("STABILIZE"));
+    // The heading is stamped on the link's clock as it arrives, each new one anew.
+    let at = t.heading_at.expect("heading stamped");
+    assert!(at <= VehicleClock::wall().now(), "{at:?}");
+    assert!(eventually(2 * S, || v
+        .telemetry()
+        .heading_at
+        .is_some_and(|later| later > at)));
     assert!(eventually(2 * S, || v
         .take_status_texts()
         .iter()

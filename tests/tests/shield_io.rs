@@ -5,7 +5,10 @@ use std::io::Write;
 use std::time::Duration;
 
 use link::shield::{EmulatorConfig, EmulatorServer, ShieldConfig, ShieldLink};
-use link::{ChannelMap, Command, FlightMode, LinkState, Pulses, Sticks, Transport, VehicleLink};
+use link::{
+    ChannelMap, Command, FlightMode, LinkState, Pulses, Sticks, Transport, VehicleClock,
+    VehicleLink,
+};
 use tests::{eventually, pty_pair};
 
 const S: Duration = Duration::from_secs(1);
@@ -28,6 +31,13 @@ fn flies_the_emulator_over_a_pseudo_terminal_through_noise() {
     assert_eq!(t.battery.map(|b| b.voltage_v), Some(12.6));
     assert_eq!(t.height_m, Some(0.0));
     assert_eq!(t.armed, Some(false));
+    // The heading is stamped on the link's clock as it arrives, each new one anew.
+    let at = t.heading_at.expect("heading stamped");
+    assert!(at <= VehicleClock::wall().now(), "{at:?}");
+    assert!(eventually(S, || link
+        .telemetry()
+        .heading_at
+        .is_some_and(|later| later > at)));
 
     // Start is refused before arming; then arm, start.
     assert!(link.command(Command::StartMotors).is_err());

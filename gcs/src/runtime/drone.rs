@@ -4,8 +4,9 @@
 
 use std::sync::Arc;
 use std::sync::mpsc::{Receiver, TryRecvError, channel};
+use std::time::Duration;
 
-use link::{Command, CommandError, FlightMode, LinkState, Sticks, VehicleLink};
+use link::{Command, CommandError, FlightMode, LinkState, Sticks, Telemetry, VehicleLink};
 use nalgebra::Isometry3;
 use nav::Grid;
 use nav::avoid::{KeepClear, keep_clear};
@@ -265,6 +266,8 @@ pub struct Drone {
     /// When the last LAND was sent (mission time), while landing.
     landing_since: Option<f64>,
     last_tick: Option<f64>,
+    /// Arrival time of the heading the filter took last (the link's stamp, mission clock).
+    heading_taken: Option<Duration>,
     /// The sticks sent last.
     pub sticks: Option<Sticks>,
     /// The filter's path: (time, x, y, z, yaw).
@@ -325,6 +328,7 @@ impl Drone {
             disarmed_since: None,
             landing_since: None,
             last_tick: None,
+            heading_taken: None,
             sticks: None,
             trajectory: vec![],
             path_length: 0.0,
@@ -574,14 +578,19 @@ impl Drone {
         let dt = self.last_tick.map_or(0.1, |t| (now - t).clamp(0.01, 1.0));
         self.last_tick = Some(now);
         let telemetry = self.link.telemetry();
-        // The filter: predict to now, then what the vehicle measured.
+        // The filter: predict to now, then what the vehicle measured. A stamped heading and
+        // attitude are taken once, at the time they arrived (a tenth of a second before this
+        // tick, typically: 1–2° behind in a turn if taken as now).
         self.ekf.predict(now);
-        if let Some(yaw) = telemetry.yaw_rad {
-            self.ekf.update_heading(now, f64::from(yaw));
-        }
-        if let Some(a) = telemetry.attitude {
-            self.ekf
-                .update_attitude(now, f64::from(a.roll), f64::from(a.pitch));
+        if let Some(heading_t) = heading_time(&telemetry, self.heading_taken, now) {
+            self.heading_taken = telemetry.heading_at;
+            if let Some(yaw) = telemetry.yaw_rad {
+                self.ekf.update_heading(heading_t, f64::from(yaw));
+            }
+            if let Some(a) = telemetry.attitude {
+                self.ekf
+                    .update_attitude(heading_t, f64::from(a.roll), f64::from(a.pitch));
+            }
         }
         let on_ground = matches!(self.phase, Phase::Idle | Phase::Arming | Phase::Landed)
             || telemetry.armed == Some(false);
@@ -953,11 +962,22 @@ impl Drone {
     }
 }
 
+/// The mission time at which the filter takes the telemetry's heading and attitude, read at
+/// `now`: when they arrived, if the link stamps them and they are new since the arrival `taken`
+/// last (`None`: nothing new); `now` for a link that does not stamp them.
+fn heading_time(telemetry: &Telemetry, taken: Option<Duration>, now: f64) -> Option<f64> {
+    match telemetry.heading_at {
+        None => Some(now),
+        Some(at) if Some(at) == taken => None,
+        Some(at) => Some(at.as_secs_f64().min(now)),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use std::sync::Mutex;
 
-    use link::{LinkStatus, StatusText, Telemetry};
+    use link::{LinkStatus, StatusText};
 
     use super::*;
 
@@ -1012,6 +1032,30 @@ mod tests {
         fn take_status_texts(&self) -> Vec<StatusText> {
             vec![]
         }
+    }
+
+    #[test]
+    fn a_stamped_heading_is_taken_once_at_its_arrival() {
+        let stamped = |at: f64| Telemetry {
+            yaw_rad: Some(0.3),
+            heading_at: Some(Duration::from_secs_f64(at)),
+            ..Telemetry::default()
+        };
+        // New: taken at its arrival, not at the tick that reads it.
+        assert_eq!(heading_time(&stamped(1.93), None, 2.0), Some(1.93));
+        let taken = stamped(1.93).heading_at;
+        assert_eq!(heading_time(&stamped(2.03), taken, 2.1), Some(2.03));
+        // Read again before the next one arrives: not taken twice.
+        assert_eq!(heading_time(&stamped(1.93), taken, 2.1), None);
+        // A stamp ahead of the reader's clock is taken as now.
+        assert_eq!(heading_time(&stamped(2.5), taken, 2.1), Some(2.1));
+        // A link that does not stamp: every reading, at its reading.
+        let unstamped = Telemetry {
+            yaw_rad: Some(0.3),
+            ..Telemetry::default()
+        };
+        assert_eq!(heading_time(&unstamped, None, 2.1), Some(2.1));
+        assert_eq!(heading_time(&unstamped, None, 2.2), Some(2.2));
     }
 
     fn exploring_drone(vehicle: Arc<StubbornVehicle>, config: &DroneConfig) -> Drone {

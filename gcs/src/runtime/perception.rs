@@ -39,9 +39,10 @@ pub struct SensorSample {
     pub t: f64,
     /// IMU heading, radians.
     pub heading: Option<f64>,
-    /// The heading was steady either side of this sample ([`heading_steady`]): fit to be a
-    /// prior on the map (set by [`SensorLog::at`] when it reads the sample back).
-    pub heading_steady: bool,
+    /// When the heading arrived, mission clock, seconds (`t` where the link does not stamp
+    /// it): telemetry is read at the control rate, so a heading is up to a period older than
+    /// the sample.
+    pub heading_t: f64,
     /// Rangefinder height above the floor, metres.
     pub height: Option<f64>,
     /// Roll and pitch (FLU, radians): the attitude the vehicle reports, fused with the sticks
@@ -49,6 +50,17 @@ pub struct SensorSample {
     pub tilt: Option<[f64; 2]>,
     /// The filter's body pose (x, y, z, yaw), if valid.
     pub body: Option<[f64; 4]>,
+}
+
+/// What the SLAM takes from a vehicle's samples at a camera frame's time ([`sensors_at`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameSensors {
+    /// The sample nearest the frame, its heading left out if taken while turning faster than
+    /// [`MAX_HEADING_RATE`].
+    pub sample: SensorSample,
+    /// The heading was steady either side of the sample ([`heading_steady`]): fit to be a
+    /// prior on the map.
+    pub heading_steady: bool,
 }
 
 /// The recent sensor samples of every drone (written by the control loop).
@@ -61,7 +73,7 @@ impl SensorLog {
         Self(Mutex::new(vec![VecDeque::new(); n]))
     }
 
-    /// Records a sample of drone `k` (the last 3 s are kept).
+    /// Records a sample of drone `k` (the last 3 s are kept; samples come in time order).
     pub fn push(&self, k: usize, s: SensorSample) {
         let mut log = self.0.lock().unwrap_or_else(PoisonError::into_inner);
         if let Some(q) = log.get_mut(k) {
@@ -72,42 +84,68 @@ impl SensorLog {
         }
     }
 
-    /// Drone `k`'s sample nearest to time `t` (within 0.25 s).
-    ///
-    /// Telemetry reaches the station up to about a control period late (its own rate, the
-    /// transport, then the control loop's sampling), so while the drone turns, its heading
-    /// lags: 0.1–0.15 s in SITL, 2–3° behind at 12°/s, more in a look-around at 36°/s (the
-    /// SLAM's heading prior is 2°). The heading is left out of a sample taken while turning
-    /// faster than [`MAX_HEADING_RATE`], and marked steady as [`heading_steady`] says.
-    pub fn at(&self, k: usize, t: f64) -> Option<SensorSample> {
-        let log = self.0.lock().unwrap_or_else(PoisonError::into_inner);
-        let q = log.get(k)?;
-        let (i, nearest) = q
-            .iter()
-            .enumerate()
-            .min_by(|(_, a), (_, b)| (a.t - t).abs().total_cmp(&(b.t - t).abs()))?;
-        if (nearest.t - t).abs() >= 0.25 {
-            return None;
-        }
-        let mut sample = *nearest;
-        let before = q.get(i.wrapping_sub(1)).unwrap_or(nearest);
-        let after = q.get(i + 1).unwrap_or(nearest);
-        let turning = match (before.heading, after.heading) {
-            (Some(a), Some(b)) if after.t > before.t => {
-                (wrap_angle(b - a) / (after.t - before.t)).abs() > MAX_HEADING_RATE
-            }
-            _ => false,
-        };
-        if turning {
-            sample.heading = None;
-        }
-        sample.heading_steady = sample.heading.is_some()
-            && heading_steady(
-                q.iter().filter_map(|s| s.heading.map(|h| (s.t, h))),
-                sample.t,
-            );
-        Some(sample)
+    /// What the SLAM takes from drone `k`'s samples at time `t` ([`sensors_at`]).
+    pub fn at(&self, k: usize, t: f64) -> Option<FrameSensors> {
+        let mut log = self.0.lock().unwrap_or_else(PoisonError::into_inner);
+        sensors_at(log.get_mut(k)?.make_contiguous(), t)
     }
+}
+
+/// What the SLAM takes from one drone's time-ordered `samples` at a camera frame's time `t`:
+/// the sample nearest it (within 0.25 s) with the heading that arrived nearest it, gated for
+/// turning and marked steady or not. The live mission and `gcs replay` both read their samples
+/// through it.
+///
+/// A heading is placed at the time it arrived, not at the control tick that read it up to a
+/// period later (taken at the tick, headings lagged 0.1–0.15 s in SITL: 2–3° at 12°/s), yet it
+/// still lags what the vehicle measured by the telemetry's transport. So it is left out of a
+/// sample taken while turning
+/// faster than [`MAX_HEADING_RATE`] (a look-around turns at 36°/s; the SLAM's heading prior is
+/// 2°), and marked steady as [`heading_steady`] says.
+pub fn sensors_at(samples: &[SensorSample], t: f64) -> Option<FrameSensors> {
+    let nearest = |times: &[f64]| {
+        let after = times.partition_point(|&s| s < t);
+        let i = match (after.checked_sub(1), times.get(after)) {
+            (Some(b), Some(&a)) if t - times[b] <= a - t => b,
+            (Some(b), None) => b,
+            (_, Some(_)) => after,
+            (None, None) => return None,
+        };
+        ((times[i] - t).abs() < 0.25).then_some(i)
+    };
+    // Samples near t, wide enough for the steady window about any heading within 0.25 s.
+    let near = &samples
+        [samples.partition_point(|s| s.t < t - 1.0)..samples.partition_point(|s| s.t <= t + 1.0)];
+    let times: Vec<f64> = near.iter().map(|s| s.t).collect();
+    let mut sample = near[nearest(&times)?];
+    // Each heading once, at its arrival.
+    let mut headings: Vec<(f64, f64)> = near
+        .iter()
+        .filter_map(|s| s.heading.map(|h| (s.heading_t, h)))
+        .collect();
+    headings.dedup_by(|later, earlier| later.0 <= earlier.0);
+    let times: Vec<f64> = headings.iter().map(|h| h.0).collect();
+    let Some(j) = nearest(&times) else {
+        sample.heading = None;
+        return Some(FrameSensors {
+            sample,
+            heading_steady: false,
+        });
+    };
+    let (before, here, next) = (
+        headings[j.saturating_sub(1)],
+        headings[j],
+        headings[(j + 1).min(headings.len() - 1)],
+    );
+    let turning = next.0 > before.0
+        && (wrap_angle(next.1 - before.1) / (next.0 - before.0)).abs() > MAX_HEADING_RATE;
+    sample.heading = (!turning).then_some(here.1);
+    sample.heading_t = here.0;
+    let heading_steady = !turning && heading_steady(headings.iter().copied(), here.0);
+    Some(FrameSensors {
+        sample,
+        heading_steady,
+    })
 }
 
 /// The fastest turn at which a telemetry heading still goes to the SLAM, radians per second.
@@ -388,7 +426,8 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
 
 /// The SLAM's input for a camera frame and the vehicle's sample at its time (with the true
 /// camera pose only when the SLAM maps on known poses); `None` for a frame of the wrong size.
-pub fn slam_frame(f: &CameraFrame, sample: Option<SensorSample>, known: bool) -> Option<Frame> {
+pub fn slam_frame(f: &CameraFrame, sensors: Option<FrameSensors>, known: bool) -> Option<Frame> {
+    let sample = sensors.map(|s| s.sample);
     let rgb = image::RgbImage::from_raw(f.frame.width, f.frame.height, f.frame.rgb.clone())?;
     let grey = image::DynamicImage::ImageRgb8(rgb).into_luma8();
     let i = f.frame.intrinsics;
@@ -411,7 +450,7 @@ pub fn slam_frame(f: &CameraFrame, sample: Option<SensorSample>, known: bool) ->
             cy: f64::from(i.cy),
         },
         heading: sample.and_then(|s| s.heading),
-        heading_steady: sample.is_some_and(|s| s.heading_steady),
+        heading_steady: sensors.is_some_and(|s| s.heading_steady),
         height: sample.and_then(|s| s.height),
         tilt: sample.and_then(|s| s.tilt),
         predicted_body: predicted,
@@ -427,7 +466,7 @@ mod tests {
         SensorSample {
             t,
             heading: Some(heading),
-            heading_steady: false,
+            heading_t: t,
             height: Some(0.9),
             tilt: None,
             body: None,
@@ -440,10 +479,42 @@ mod tests {
         for i in 0..10 {
             log.push(0, sample(f64::from(i) * 0.1, 1.0));
         }
-        assert_eq!(log.at(0, 0.42).map(|s| s.t), Some(0.4));
-        assert_eq!(log.at(0, 0.42).and_then(|s| s.heading), Some(1.0));
+        assert_eq!(log.at(0, 0.42).map(|s| s.sample.t), Some(0.4));
+        assert_eq!(log.at(0, 0.46).map(|s| s.sample.t), Some(0.5));
+        assert_eq!(log.at(0, -0.1).map(|s| s.sample.t), Some(0.0));
+        assert_eq!(log.at(0, 1.1).map(|s| s.sample.t), Some(0.9));
+        assert_eq!(log.at(0, 0.42).and_then(|s| s.sample.heading), Some(1.0));
         assert!(log.at(0, 1.5).is_none(), "nothing within 0.25 s");
         assert!(log.at(1, 0.4).is_none(), "no such drone");
+    }
+
+    #[test]
+    fn a_heading_is_placed_at_its_arrival_not_at_the_tick_that_read_it() {
+        let log = SensorLog::new(1);
+        // Turning at 0.1 rad/s (under the turning gate); the control loop reads telemetry at
+        // 10 Hz, each heading having arrived 70 ms before the tick that read it, and one tick
+        // finds no new heading (the one of the tick before, again).
+        for i in 0..20 {
+            let t = f64::from(i) * 0.1;
+            let arrived = if i == 12 { t - 0.17 } else { t - 0.07 };
+            let mut s = sample(t, 0.1 * arrived);
+            s.heading_t = arrived;
+            log.push(0, s);
+        }
+        // A frame at 1.03 s: the tick nearest it read the heading of 0.93 s; the one that
+        // arrived at 1.03 s is the heading then.
+        let s = log.at(0, 1.03).expect("a sample");
+        assert!((s.sample.t - 1.0).abs() < 1e-9, "{s:?}");
+        assert!((s.sample.heading_t - 1.03).abs() < 1e-9, "{s:?}");
+        let heading = s.sample.heading.expect("slow enough for the SLAM");
+        assert!((heading - 0.103).abs() < 1e-9, "{heading}");
+        // The heading read twice counts once: the turn's rate is not doubled into a "fast
+        // turn", and the frame at 1.12 s gets the heading of 1.03 s (none arrived at 1.13 s).
+        let s = log.at(0, 1.12).expect("a sample");
+        assert!((s.sample.heading_t - 1.03).abs() < 1e-9, "{s:?}");
+        assert!(s.sample.heading.is_some(), "{s:?}");
+        // A slow turn is no prior on the map, wherever its headings are placed.
+        assert!(!s.heading_steady);
     }
 
     #[test]
@@ -457,7 +528,7 @@ mod tests {
             log.push(0, sample(t, yaw));
         }
         for t in [0.0, 0.55, 1.0, 2.9] {
-            let s = log.at(0, t).expect("a sample");
+            let s = log.at(0, t).expect("a sample").sample;
             assert!(s.heading.is_none(), "t = {t}: {s:?}");
             assert_eq!(s.height, Some(0.9), "the height stays");
         }
@@ -465,7 +536,7 @@ mod tests {
         for i in 30..40 {
             log.push(0, sample(f64::from(i) * 0.1, 1.0 + f64::from(i) * 0.0035));
         }
-        assert!(log.at(0, 3.5).and_then(|s| s.heading).is_some());
+        assert!(log.at(0, 3.5).and_then(|s| s.sample.heading).is_some());
     }
 
     #[test]
@@ -481,7 +552,10 @@ mod tests {
         }
         let steady = |t: f64| {
             let s = log.at(0, t).expect("a sample");
-            assert!(s.heading.is_some(), "t = {t}: slow enough for the SLAM");
+            assert!(
+                s.sample.heading.is_some(),
+                "t = {t}: slow enough for the SLAM"
+            );
             s.heading_steady
         };
         assert!(steady(0.5), "noise is not a turn");

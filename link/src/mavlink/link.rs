@@ -996,6 +996,7 @@ fn handle_frame(shared: &Shared, frame: &RawFrame, now: Instant) {
             };
             t.attitude = Some(att);
             t.yaw_rad = Some(att.yaw);
+            t.heading_at = Some(cfg.clock.now());
         }
         MavMessage::LOCAL_POSITION_NED(p) => {
             t.position_m = Some([p.x, -p.y, -p.z]);

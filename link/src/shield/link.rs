@@ -288,6 +288,7 @@ fn apply(s: &mut State, frame: UpRepr, now: Duration) {
             let tm = &mut s.telemetry;
             tm.height_m = t.sonar_mm.map(|mm| f32::from(mm) / 1000.0);
             tm.yaw_rad = Some(yaw);
+            tm.heading_at = Some(now);
             tm.attitude = None;
             tm.battery = Some(Battery {
                 voltage_v: f32::from(t.battery_mv) / 1000.0,
