@@ -1041,14 +1041,15 @@ mod tests {
             heading_at: Some(Duration::from_secs_f64(at)),
             ..Telemetry::default()
         };
-        // New: taken at its arrival, not at the tick that reads it.
-        assert_eq!(heading_time(&stamped(1.93), None, 2.0), Some(1.93));
-        let taken = stamped(1.93).heading_at;
-        assert_eq!(heading_time(&stamped(2.03), taken, 2.1), Some(2.03));
+        // New: taken at its arrival, not at the tick that reads it (times a binary fraction
+        // of a second, exact through a Duration).
+        assert_eq!(heading_time(&stamped(1.875), None, 2.0), Some(1.875));
+        let taken = stamped(1.875).heading_at;
+        assert_eq!(heading_time(&stamped(2.0625), taken, 2.125), Some(2.0625));
         // Read again before the next one arrives: not taken twice.
-        assert_eq!(heading_time(&stamped(1.93), taken, 2.1), None);
+        assert_eq!(heading_time(&stamped(1.875), taken, 2.125), None);
         // A stamp ahead of the reader's clock is taken as now.
-        assert_eq!(heading_time(&stamped(2.5), taken, 2.1), Some(2.1));
+        assert_eq!(heading_time(&stamped(2.5), taken, 2.125), Some(2.125));
         // A link that does not stamp: every reading, at its reading.
         let unstamped = Telemetry {
             yaw_rad: Some(0.3),
