@@ -183,6 +183,15 @@ pub struct Telemetry {
     pub mode: Option<String>,
 }
 
+impl Telemetry {
+    /// When the heading (and attitude) arrived, in seconds on the link's clock, read at `now`
+    /// on that clock: the stamp, never later than `now`; `now` for a link that does not stamp
+    /// them.
+    pub fn heading_time(&self, now: f64) -> f64 {
+        self.heading_at.map_or(now, |at| at.as_secs_f64().min(now))
+    }
+}
+
 /// A text message from the vehicle.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct StatusText {
@@ -259,6 +268,19 @@ impl TextQueue {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_heading_is_timed_by_its_stamp_never_later_than_now() {
+        let unstamped = Telemetry::default();
+        assert_eq!(unstamped.heading_time(2.5), 2.5);
+        let stamped = Telemetry {
+            heading_at: Some(Duration::from_millis(2250)),
+            ..Telemetry::default()
+        };
+        assert_eq!(stamped.heading_time(2.5), 2.25);
+        // A stamp ahead of the reader's clock (another thread read the clock later) is now.
+        assert_eq!(stamped.heading_time(2.0), 2.0);
+    }
 
     #[test]
     fn modes_parse_by_name_and_say_what_is_known() {

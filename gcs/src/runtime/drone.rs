@@ -966,11 +966,8 @@ impl Drone {
 /// `now`: when they arrived, if the link stamps them and they are new since the arrival `taken`
 /// last (`None`: nothing new); `now` for a link that does not stamp them.
 fn heading_time(telemetry: &Telemetry, taken: Option<Duration>, now: f64) -> Option<f64> {
-    match telemetry.heading_at {
-        None => Some(now),
-        Some(at) if Some(at) == taken => None,
-        Some(at) => Some(at.as_secs_f64().min(now)),
-    }
+    let new = telemetry.heading_at.is_none() || telemetry.heading_at != taken;
+    new.then(|| telemetry.heading_time(now))
 }
 
 #[cfg(test)]

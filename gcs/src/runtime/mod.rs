@@ -642,7 +642,7 @@ impl Mission {
                 SensorSample {
                     t: now,
                     heading: t.yaw_rad.map(f64::from),
-                    heading_t: t.heading_at.map_or(now, |at| at.as_secs_f64().min(now)),
+                    heading_t: t.heading_time(now),
                     height: t.height_m.map(f64::from),
                     tilt: Some(d.tilt()),
                     body: d.pose(),
