@@ -24,6 +24,7 @@ use gcs::fleet::{LinkKind, SimFleet, SimFleetConfig, sim_body_from_camera};
 use gcs::gui::Station;
 use gcs::outputs;
 use gcs::record::{Record, Recorder, Setup, SetupDrone};
+use gcs::runtime::drone::DroneConfig;
 use gcs::runtime::{MissionState, Operator, Outcome, Runtime, RuntimeConfig};
 
 use crate::gui_cmd::{LogArgs, Window, WindowArgs, beside_window};
@@ -62,6 +63,19 @@ pub struct SimArgs {
     /// region of its own).
     #[arg(long, value_name = "METRES", default_value_t = PlannerConfig::default().region_radius_m)]
     pub region_radius: f64,
+    /// How a drone looks around at a goal: turning the short way to what the map shows
+    /// unknown, no further (`sweep`), or a whole turn every time (`whole`, as the thesis).
+    #[arg(long, value_enum, default_value_t = LookAround::Sweep)]
+    pub look_around: LookAround,
+}
+
+/// How a drone looks around at a goal.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum LookAround {
+    /// Turn the short way to what the map shows unknown, and no further.
+    Sweep,
+    /// A whole turn every time.
+    Whole,
 }
 
 /// Arguments of `gcs explore`.
@@ -411,6 +425,13 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
             strategy: args.sim.strategy.strategy(),
             region_radius_m: args.sim.region_radius,
             timeout: Some(args.timeout),
+            drone: DroneConfig {
+                sweep: match args.sim.look_around {
+                    LookAround::Sweep => DroneConfig::default().sweep,
+                    LookAround::Whole => None,
+                },
+                ..DroneConfig::default()
+            },
             // In the window the operator starts the mission (again, after a landing), and the
             // runtime lasts until the window closes.
             auto_start: !waits,

@@ -14,6 +14,7 @@ pub mod local;
 pub mod mission;
 pub mod render;
 pub mod search;
+pub mod sweep;
 pub mod vantage;
 
 pub use grid::{Cell, CellXY, Grid, MapError};

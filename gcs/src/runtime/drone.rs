@@ -12,7 +12,11 @@ use nav::Grid;
 use nav::avoid::{KeepClear, keep_clear};
 use nav::control::{PidGains, Pose3, PositionController, PositionGains};
 use nav::local::{Follow, FollowerConfig, PathFollower, Pose2, wrap_angle};
+use nav::sweep::{self, View};
 use slam::ekf::{Ekf, EkfConfig, Input, Update};
+
+/// Bearings a look around checks for the unknown (5° apart).
+const SWEEP_BEARINGS: usize = 72;
 
 /// What a drone is doing.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -103,8 +107,13 @@ pub struct DroneConfig {
     pub keep_clear: KeepClear,
     /// Seconds without 0.3 m of progress toward a goal before it is given up.
     pub stuck_s: f64,
-    /// A look around on the spot takes this long, seconds.
+    /// A whole look around on the spot takes this long, seconds.
     pub scan_s: f64,
+    /// A look around turns the short way to what the map shows unknown around the drone, and
+    /// only as far as that ([`nav::sweep`]); `None`: a whole turn every time.
+    pub sweep: Option<View>,
+    /// ... but lasts at least this long, seconds (the map lags the camera by up to a second).
+    pub scan_min_s: f64,
     /// Yaw stick while the SLAM has lost the drone and the turn back found nothing (a slow turn
     /// so the camera finds known views).
     pub blind_yaw: f32,
@@ -167,6 +176,8 @@ impl Default for DroneConfig {
             keep_clear: KeepClear::default(),
             stuck_s: 15.0,
             scan_s: 10.0,
+            sweep: Some(View::default()),
+            scan_min_s: 2.0,
             blind_yaw: 0.2,
             lost_back_m: 1.0,
             blind_turn_back_s: 10.0,
@@ -185,6 +196,8 @@ impl Default for DroneConfig {
 struct Scan {
     since: f64,
     yaw0: f64,
+    /// +1: counter-clockwise, −1: clockwise.
+    direction: f64,
     /// The goal to give up after it (reached while its frontier stayed).
     give_up: Option<[f64; 2]>,
     /// The SLAM lost the drone during it: turning on would lose it again where it did (a
@@ -193,11 +206,13 @@ struct Scan {
 }
 
 impl Scan {
-    /// A look around starting at `since` from heading `yaw0`, giving up `give_up` after it.
+    /// A look around starting at `since` from heading `yaw0`, counter-clockwise, giving up
+    /// `give_up` after it.
     fn new(since: f64, yaw0: f64, give_up: Option<[f64; 2]>) -> Self {
         Self {
             since,
             yaw0,
+            direction: 1.0,
             give_up,
             cut: false,
         }
@@ -754,7 +769,7 @@ impl Drone {
                 if pose[2] > self.altitude - 0.1 {
                     // Airborne: look around once, so the first plan sees every side.
                     self.phase = Phase::Exploring;
-                    self.scan = Some(Scan::new(now, pose[3], None));
+                    self.scan = Some(self.look_around(now, pose, None, config));
                     self.progress = (now, here);
                 }
             }
@@ -882,6 +897,32 @@ impl Drone {
         f
     }
 
+    /// A look around from `pose`, turning the short way to what the map shows unknown.
+    fn look_around(
+        &self,
+        now: f64,
+        pose: [f64; 4],
+        give_up: Option<[f64; 2]>,
+        config: &DroneConfig,
+    ) -> Scan {
+        let mut scan = Scan::new(now, pose[3], give_up);
+        if let (Some(view), Some(map)) = (&config.sweep, &self.map) {
+            let unknown = sweep::unknown_bearings(map, [pose[0], pose[1]], view, SWEEP_BEARINGS);
+            scan.direction = sweep::direction(&unknown, pose[3], view);
+        }
+        scan
+    }
+
+    /// Whether the look around `scan`, its heading goal `swept` radians on, has unknown
+    /// bearings ahead of the camera still (always, without a map or with sweeps off).
+    fn unknown_ahead(&self, here: [f64; 2], scan: &Scan, swept: f64, config: &DroneConfig) -> bool {
+        let (Some(view), Some(map)) = (&config.sweep, &self.map) else {
+            return true;
+        };
+        let unknown = sweep::unknown_bearings(map, here, view, SWEEP_BEARINGS);
+        sweep::still_unknown_ahead(&unknown, scan.yaw0, scan.direction, swept, view)
+    }
+
     fn explore_step(
         &mut self,
         now: f64,
@@ -893,10 +934,13 @@ impl Drone {
             self.progress = (now, here);
         }
         if let Some(scan) = self.scan {
-            // A full turn on the spot (36°/s), then the goal (if any) is given up.
+            // A turn on the spot (36°/s) until nothing unknown is left to look at, at most a
+            // whole one, then the goal (if any) is given up.
             let t = now - scan.since;
-            if t < config.scan_s && !scan.cut {
-                self.yaw_goal = scan.yaw0 + t * std::f64::consts::TAU / config.scan_s;
+            let swept = t * std::f64::consts::TAU / config.scan_s;
+            let more = t < config.scan_min_s || self.unknown_ahead(here, &scan, swept, config);
+            if t < config.scan_s && !scan.cut && more {
+                self.yaw_goal = scan.yaw0 + scan.direction * swept;
                 self.progress = (now, here);
                 return None;
             }
@@ -906,12 +950,19 @@ impl Drone {
                     "the look around lost the map: it ends where the map was found again"
                 );
             }
+            tracing::debug!(
+                drone = self.id + 1,
+                seconds = t,
+                turned_deg = (scan.direction * swept).to_degrees(),
+                "look around over"
+            );
             self.scan = None;
             return scan.give_up.map(DroneEvent::GiveUp);
         }
         if let Follow::Arrived = self.follow(pose) {
             self.follower.set_path(vec![]);
-            self.scan = Some(Scan::new(now, pose[3], self.goal.take()));
+            let goal = self.goal.take();
+            self.scan = Some(self.look_around(now, pose, goal, config));
             self.hold = here;
             return None;
         }
@@ -1334,6 +1385,65 @@ mod tests {
         let (drone, where_lost, _) = lost_after_keyframe_at(0.1 - config.lost_back_m - 0.2);
         assert!(where_lost[0] > 0.0, "lost at the last fix: {where_lost:?}");
         assert_eq!(drone.hold, [where_lost[0], where_lost[1]]);
+    }
+
+    /// Looks around from (0, 0), facing +x, in a known 4 × 4 m room whose `unknown` cells
+    /// (x range, y range, metres) are not mapped, the heading following its goal; returns the
+    /// event that ended it, when, and the heading goal then.
+    fn look_around_in(unknown: Option<([f64; 2], [f64; 2])>) -> (DroneEvent, f64, f64) {
+        let config = DroneConfig::default();
+        let mut drone = exploring_drone(Arc::default(), &config);
+        let mut map = Grid::new(80, 80, 0.05, [-2.0, -2.0], nav::Cell::Free);
+        for i in 0..80 {
+            for c in [(i, 0), (i, 79), (0, i), (79, i)] {
+                map.set(c, nav::Cell::Occupied);
+            }
+        }
+        for y in 0..80 {
+            for x in 0..80 {
+                let p = map.center_of((x, y));
+                if unknown.is_some_and(|(xs, ys)| {
+                    (xs[0]..xs[1]).contains(&p[0]) && (ys[0]..ys[1]).contains(&p[1])
+                }) {
+                    map.set((x, y), nav::Cell::Unknown);
+                }
+            }
+        }
+        drone.set_map(Arc::new(map));
+        drone.scan = Some(drone.look_around(0.0, [0.0, 0.0, 0.9, 0.0], Some([1.0, 0.0]), &config));
+        let mut t = 0.0;
+        loop {
+            t += 0.1;
+            drone.slam_fix(t, [0.0, 0.0, 0.9], drone.yaw_goal, None, false);
+            if let Some(event) = drone.tick(t, &config) {
+                return (event, t, drone.yaw_goal);
+            }
+            assert!(t < config.scan_s + 1.0, "the look around went on");
+        }
+    }
+
+    #[test]
+    fn a_look_around_turns_the_short_way_to_the_unknown_and_no_further() {
+        let config = DroneConfig::default();
+        // The unknown to the right (south): a clockwise quarter turn, not a whole one.
+        let (event, t, yaw) = look_around_in(Some(([-0.3, 0.3], [-1.95, -1.0])));
+        assert_eq!(event, DroneEvent::GiveUp([1.0, 0.0]));
+        assert!(yaw < -1.5 && yaw > -3.0, "clockwise past south: {yaw} rad");
+        assert!(t < 0.6 * config.scan_s, "ended at {t} s");
+        // Nothing unknown: it holds for the map to catch up with the camera, then goes on.
+        let (_, t, _) = look_around_in(None);
+        assert!(
+            t >= config.scan_min_s && t < config.scan_min_s + 0.2,
+            "ended at {t} s"
+        );
+        // The unknown on every side: the whole turn (until the view has met where it began).
+        let (_, t, yaw) = look_around_in(Some(([-1.95, 1.95], [-1.95, 1.95])));
+        let half_fov = View::default().half_fov_rad;
+        assert!(t > 0.8 * config.scan_s, "ended at {t} s");
+        assert!(
+            yaw >= std::f64::consts::TAU - 2.0 * half_fov,
+            "a whole turn: {yaw} rad"
+        );
     }
 
     #[test]

@@ -1,0 +1,241 @@
+//! The look around at a goal: which way to turn, and when the camera has seen enough.
+//!
+//! A robot that reaches a frontier's goal turns on the spot so its camera (about 60° wide) sees
+//! every side. A whole turn took 10 s at every goal, yet most of what it looked at was known
+//! already: the robot arrives facing the way it flew, and it flew through known space. The
+//! sweep looks at the map instead. A ray from the robot per bearing tells whether the camera,
+//! looking that way, would see unknown cells within its depth range (through free and unknown
+//! cells, up to the first wall). The turn goes the way that brings every such bearing into view
+//! soonest, and ends once none is left ahead of the camera.
+
+use std::f64::consts::TAU;
+
+use crate::grid::{Cell, Grid};
+
+/// What the camera sees from where the robot looks around.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct View {
+    /// Half the camera's horizontal field of view, radians (a Kinect's is 0.55; a little less
+    /// leaves a margin at the image's edge, where depth is sparse).
+    pub half_fov_rad: f64,
+    /// Nearest depth the camera measures, metres.
+    pub min_range_m: f64,
+    /// Farthest depth the occupancy map takes, metres (a bit under it: far depth is noisy and
+    /// sparse).
+    pub max_range_m: f64,
+    /// A bearing shows the unknown when its ray crosses at least this many unknown cells in
+    /// range: fewer are the ragged edges of walls.
+    pub min_unknown_cells: usize,
+}
+
+impl Default for View {
+    fn default() -> Self {
+        Self {
+            half_fov_rad: 0.5,
+            min_range_m: 0.4,
+            max_range_m: 3.5,
+            min_unknown_cells: 4,
+        }
+    }
+}
+
+/// Bearings in the map frame (radians, + = counter-clockwise from +x) of `bins` equal sectors
+/// around `at`: `true` for each whose central ray crosses unknown cells (at least
+/// [`View::min_unknown_cells`]) between the camera's minimum and maximum range before it meets
+/// a wall or leaves the map.
+pub fn unknown_bearings(map: &Grid, at: [f64; 2], view: &View, bins: usize) -> Vec<bool> {
+    let step = map.resolution() / 2.0;
+    (0..bins)
+        .map(|b| {
+            let bearing = (b as f64 + 0.5) * TAU / bins as f64;
+            let (dx, dy) = (bearing.cos(), bearing.sin());
+            let mut unknown = 0;
+            let mut last = None;
+            let mut s = 0.0;
+            while s <= view.max_range_m {
+                let Some(c) = map.cell_of([at[0] + s * dx, at[1] + s * dy]) else {
+                    break;
+                };
+                match map.get(c) {
+                    Cell::Occupied => break,
+                    Cell::Unknown if s >= view.min_range_m && last != Some(c) => unknown += 1,
+                    _ => {}
+                }
+                last = Some(c);
+                s += step;
+            }
+            unknown >= view.min_unknown_cells
+        })
+        .collect()
+}
+
+/// The bearing at the centre of bin `b` of `bins`.
+fn bearing_of(b: usize, bins: usize) -> f64 {
+    (b as f64 + 0.5) * TAU / bins as f64
+}
+
+/// How far a bearing lies from `start` turning in `direction` (+1 counter-clockwise, −1
+/// clockwise), in [0, 2π).
+fn turned(bearing: f64, start: f64, direction: f64) -> f64 {
+    ((bearing - start) * direction).rem_euclid(TAU)
+}
+
+/// The way to turn from heading `yaw` so that every bearing of `unknown` (from
+/// [`unknown_bearings`]) not in view now comes into view soonest: +1 counter-clockwise, −1
+/// clockwise (counter-clockwise on a tie).
+pub fn direction(unknown: &[bool], yaw: f64, view: &View) -> f64 {
+    let need = |direction: f64| {
+        unknown
+            .iter()
+            .enumerate()
+            .filter(|&(_, &u)| u)
+            .map(|(b, _)| turned(bearing_of(b, unknown.len()), yaw, direction))
+            .filter(|&o| o > view.half_fov_rad && o < TAU - view.half_fov_rad)
+            .map(|o| o - view.half_fov_rad)
+            .fold(0.0, f64::max)
+    };
+    // A tie (the same turn either way, to rounding) goes counter-clockwise.
+    if need(-1.0) < need(1.0) - 1e-9 {
+        -1.0
+    } else {
+        1.0
+    }
+}
+
+/// Whether a look around that began facing `yaw0`, turning in `direction`, and has turned its
+/// heading goal through `swept` radians, still has something to look at: a bearing of `unknown`
+/// from the leading edge of the view now (less a view's width, for the map's lag behind the
+/// camera and the heading's behind its goal) to where a whole turn would leave the view.
+pub fn still_unknown_ahead(
+    unknown: &[bool],
+    yaw0: f64,
+    direction: f64,
+    swept: f64,
+    view: &View,
+) -> bool {
+    let from = swept - view.half_fov_rad;
+    let to = TAU - view.half_fov_rad;
+    unknown.iter().enumerate().any(|(b, &u)| {
+        let o = turned(bearing_of(b, unknown.len()), yaw0, direction);
+        // The bearings just behind the start (o near 2π) were in view when the turn began.
+        u && o >= from && o <= to
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 6 × 6 m room of known free space, walls on every side, the robot in its middle;
+    /// `unknown` cells (x range, y range in metres) left unobserved.
+    fn room(unknown: &[([f64; 2], [f64; 2])]) -> Grid {
+        let res = 0.05;
+        let mut g = Grid::new(120, 120, res, [-3.0, -3.0], Cell::Free);
+        for i in 0..120 {
+            for c in [(i, 0), (i, 119), (0, i), (119, i)] {
+                g.set(c, Cell::Occupied);
+            }
+        }
+        for &(xs, ys) in unknown {
+            for y in 0..120 {
+                for x in 0..120 {
+                    let p = g.center_of((x, y));
+                    if (xs[0]..xs[1]).contains(&p[0]) && (ys[0]..ys[1]).contains(&p[1]) {
+                        g.set((x, y), Cell::Unknown);
+                    }
+                }
+            }
+        }
+        g
+    }
+
+    #[test]
+    fn a_known_room_shows_no_unknown_and_an_unseen_corner_shows_where_it_is() {
+        let view = View::default();
+        let known = unknown_bearings(&room(&[]), [0.0, 0.0], &view, 72);
+        assert!(known.iter().all(|u| !u), "{known:?}");
+        // The corner to the south-west (around bearing −135°, i.e. 225°).
+        let corner = room(&[([-2.9, -1.0], [-2.9, -1.0])]);
+        let u = unknown_bearings(&corner, [0.0, 0.0], &view, 72);
+        let seen: Vec<f64> = (0..72)
+            .filter(|&b| u[b])
+            .map(|b| bearing_of(b, 72).to_degrees())
+            .collect();
+        assert!(!seen.is_empty());
+        assert!(
+            seen.iter().all(|d| (200.0..250.0).contains(d)),
+            "bearings {seen:?}"
+        );
+    }
+
+    #[test]
+    fn walls_hide_what_lies_behind_them_and_range_limits_the_view() {
+        let view = View::default();
+        // Unknown beyond the east wall (outside the room): hidden by it.
+        let mut g = Grid::new(160, 120, 0.05, [-3.0, -3.0], Cell::Unknown);
+        for y in 1..119 {
+            for x in 1..119 {
+                g.set((x, y), Cell::Free);
+            }
+        }
+        for i in 0..120 {
+            for c in [(i, 0), (i, 119), (0, i), (119, i)] {
+                g.set(c, Cell::Occupied);
+            }
+        }
+        let u = unknown_bearings(&g, [0.0, 0.0], &view, 72);
+        assert!(u.iter().all(|u| !u), "{u:?}");
+        // Unknown 3.8 m east of the robot, beyond the 3.5 m the map takes: not worth a look.
+        let far = room(&[([2.5, 2.95], [-0.2, 0.2])]);
+        let u = unknown_bearings(&far, [-1.3, 0.0], &view, 72);
+        assert!(u.iter().all(|u| !u), "{u:?}");
+        let u = unknown_bearings(&far, [0.0, 0.0], &view, 72);
+        assert!(u[0] || u[71], "2.5 m east is in range: {u:?}");
+    }
+
+    #[test]
+    fn the_turn_goes_the_short_way_and_ends_once_the_unknown_has_been_in_view() {
+        let view = View::default();
+        // Unknown 90° to the right of a robot facing +x (south: bearing 270°).
+        let south = room(&[([-0.3, 0.3], [-2.9, -1.5])]);
+        let u = unknown_bearings(&south, [0.0, 0.0], &view, 72);
+        assert_eq!(
+            direction(&u, 0.0, &view),
+            -1.0,
+            "clockwise is 90°, not 270°"
+        );
+        // Facing north-west instead (135°): counter-clockwise reaches 270° sooner.
+        assert_eq!(direction(&u, 135f64.to_radians(), &view), 1.0);
+        // Clockwise from +x: ahead until the view's leading edge has passed 90° (less the
+        // lag margin of one view), then nothing is left.
+        let ahead =
+            |swept_deg: f64| still_unknown_ahead(&u, 0.0, -1.0, swept_deg.to_radians(), &view);
+        assert!(ahead(0.0));
+        assert!(ahead(60.0));
+        assert!(ahead(110.0), "the map may not show what the camera saw yet");
+        assert!(!ahead(150.0));
+        // The unknown on every side: as far either way, so counter-clockwise.
+        assert_eq!(direction(&[true; 72], 0.0, &view), 1.0);
+        // Nothing unknown at all: nothing to look at, the way does not matter.
+        let none = vec![false; 72];
+        assert_eq!(direction(&none, 1.0, &view), 1.0);
+        assert!(!still_unknown_ahead(&none, 1.0, 1.0, 0.0, &view));
+    }
+
+    #[test]
+    fn the_unknown_in_view_at_the_start_is_not_a_reason_to_turn() {
+        let view = View::default();
+        // Unknown straight ahead (east) only: seen as the turn begins, so the turn can end.
+        let east = room(&[([1.5, 2.9], [-0.3, 0.3])]);
+        let u = unknown_bearings(&east, [0.0, 0.0], &view, 72);
+        assert!(u.iter().any(|&u| u));
+        let swept = 2.0 * view.half_fov_rad + 0.01;
+        assert!(!still_unknown_ahead(&u, 0.0, 1.0, swept, &view));
+        assert!(!still_unknown_ahead(&u, 0.0, -1.0, swept, &view));
+        // Behind the robot (west) it stays ahead until the view has turned to it.
+        let west = room(&[([-2.9, -1.5], [-0.3, 0.3])]);
+        let u = unknown_bearings(&west, [0.0, 0.0], &view, 72);
+        assert!(still_unknown_ahead(&u, 0.0, 1.0, 2.0, &view));
+        assert!(!still_unknown_ahead(&u, 0.0, 1.0, 4.0, &view));
+    }
+}
