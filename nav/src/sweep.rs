@@ -47,7 +47,7 @@ pub fn unknown_bearings(map: &Grid, at: [f64; 2], view: &View, bins: usize) -> V
     let step = map.resolution() / 2.0;
     (0..bins)
         .map(|b| {
-            let bearing = (b as f64 + 0.5) * TAU / bins as f64;
+            let bearing = bearing_of(b, bins);
             let (dx, dy) = (bearing.cos(), bearing.sin());
             let mut unknown = 0;
             let mut last = None;
