@@ -35,6 +35,17 @@ impl Intrinsics {
             cy: (height as f32 - 1.0) / 2.0,
         }
     }
+
+    /// The angle from the optical axis to the nearer of the image's left and right edges, for
+    /// an image `width` pixels wide, radians: half the horizontal field of view that is seen on
+    /// both sides (0.55 for a Kinect). Negative when the principal point lies outside the image.
+    pub fn half_fov_x(&self, width: u32) -> f64 {
+        let (fx, cx) = (f64::from(self.fx), f64::from(self.cx));
+        // Pixel centres are at whole numbers: the image spans −0.5 … width − 0.5.
+        let left = (cx + 0.5) / fx;
+        let right = (f64::from(width) - 0.5 - cx) / fx;
+        left.min(right).atan()
+    }
 }
 
 /// One RGB-D frame: colour and registered depth of the same size.
@@ -306,6 +317,28 @@ mod tests {
                 .map(|i| if i % 5 == 0 { 0 } else { 400 + i as u16 * 3 })
                 .collect(),
         }
+    }
+
+    #[test]
+    fn the_field_of_view_is_the_narrower_side_of_the_principal_point() {
+        let kinect = Intrinsics::kinect(640, 480);
+        assert!((kinect.half_fov_x(640) - (320.0f64 / 525.0).atan()).abs() < 1e-9);
+        assert!((kinect.half_fov_x(640).to_degrees() - 31.4).abs() < 0.1);
+        // The same lens at a quarter of the resolution sees the same angle.
+        let small = Intrinsics::kinect(160, 120);
+        assert!((small.half_fov_x(160) - kinect.half_fov_x(640)).abs() < 1e-6);
+        // Off-centre to the right: the left side is the wider, the right one counts.
+        let off = Intrinsics {
+            cx: 419.5,
+            ..kinect
+        };
+        assert!((off.half_fov_x(640) - (220.0f64 / 525.0).atan()).abs() < 1e-9);
+        // A principal point beyond the image's edge sees nothing on that side.
+        let outside = Intrinsics {
+            cx: 700.0,
+            ..kinect
+        };
+        assert!(outside.half_fov_x(640) < 0.0);
     }
 
     #[test]

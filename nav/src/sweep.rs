@@ -26,6 +26,9 @@ pub struct View {
     /// A bearing shows the unknown when its ray crosses at least this many unknown cells in
     /// range: fewer are the ragged edges of walls.
     pub min_unknown_cells: usize,
+    /// How far the turn's goal runs ahead of what the map shows, radians: the heading lags its
+    /// goal and the map lags the camera (about 1.6 s at the look around's 36°/s).
+    pub lag_rad: f64,
 }
 
 impl Default for View {
@@ -35,6 +38,28 @@ impl Default for View {
             min_range_m: 0.4,
             max_range_m: 3.5,
             min_unknown_cells: 4,
+            lag_rad: 1.0,
+        }
+    }
+}
+
+impl View {
+    /// Bearings this near the left or right edge of the image do not count as seen, radians:
+    /// depth is sparse there.
+    pub const EDGE_MARGIN_RAD: f64 = 0.05;
+
+    /// These settings for a camera that sees `camera_half_fov_rad` either side of its axis
+    /// (from its intrinsics), less [`Self::EDGE_MARGIN_RAD`]. A field of view that is not a
+    /// number or no wider than the margin (intrinsics that cannot be right) leaves them as they
+    /// are.
+    pub fn for_camera(self, camera_half_fov_rad: f64) -> Self {
+        if camera_half_fov_rad.is_finite() && camera_half_fov_rad > 2.0 * Self::EDGE_MARGIN_RAD {
+            Self {
+                half_fov_rad: camera_half_fov_rad - Self::EDGE_MARGIN_RAD,
+                ..self
+            }
+        } else {
+            self
         }
     }
 }
@@ -104,8 +129,8 @@ pub fn direction(unknown: &[bool], yaw: f64, view: &View) -> f64 {
 
 /// Whether a look around that began facing `yaw0`, turning in `direction`, and has turned its
 /// heading goal through `swept` radians, still has something to look at: a bearing of `unknown`
-/// from the leading edge of the view now (less a view's width, for the map's lag behind the
-/// camera and the heading's behind its goal) to where a whole turn would leave the view.
+/// from the leading edge of the view now (less [`View::lag_rad`]) to where a whole turn would
+/// leave the view.
 pub fn still_unknown_ahead(
     unknown: &[bool],
     yaw0: f64,
@@ -113,7 +138,7 @@ pub fn still_unknown_ahead(
     swept: f64,
     view: &View,
 ) -> bool {
-    let from = swept - view.half_fov_rad;
+    let from = swept + view.half_fov_rad - view.lag_rad;
     let to = TAU - view.half_fov_rad;
     unknown.iter().enumerate().any(|(b, &u)| {
         let o = turned(bearing_of(b, unknown.len()), yaw0, direction);
@@ -237,5 +262,36 @@ mod tests {
         let u = unknown_bearings(&west, [0.0, 0.0], &view, 72);
         assert!(still_unknown_ahead(&u, 0.0, 1.0, 2.0, &view));
         assert!(!still_unknown_ahead(&u, 0.0, 1.0, 4.0, &view));
+    }
+
+    #[test]
+    fn a_wider_camera_is_done_sooner_and_bad_intrinsics_change_nothing() {
+        let kinect = View::default();
+        let wide = kinect.for_camera(1.05);
+        assert!((wide.half_fov_rad - 1.0).abs() < 1e-12);
+        assert_eq!(
+            (wide.max_range_m, wide.lag_rad),
+            (kinect.max_range_m, kinect.lag_rad)
+        );
+        // A Kinect's own intrinsics give about the default.
+        assert!((kinect.for_camera(0.5476).half_fov_rad - kinect.half_fov_rad).abs() < 0.01);
+        for nonsense in [f64::NAN, f64::INFINITY, -0.3, 0.0, 0.1] {
+            assert_eq!(kinect.for_camera(nonsense), kinect, "{nonsense}");
+        }
+        // Unknown behind the robot (west, 169°–191°), turning counter-clockwise: the wide view
+        // has it all in sight (and the map has caught up) by 200°, the narrow one not yet.
+        let west = room(&[([-2.9, -1.5], [-0.3, 0.3])]);
+        let u = unknown_bearings(&west, [0.0, 0.0], &kinect, 72);
+        let ahead =
+            |view: &View, deg: f64| still_unknown_ahead(&u, 0.0, 1.0, deg.to_radians(), view);
+        assert!(ahead(&kinect, 200.0) && ahead(&wide, 150.0));
+        assert!(!ahead(&wide, 200.0));
+        assert!(!ahead(&kinect, 230.0));
+        // The wide view needs less of a turn to see south (270°) the short way round.
+        let south = room(&[([-0.3, 0.3], [-2.9, -1.5])]);
+        let u = unknown_bearings(&south, [0.0, 0.0], &kinect, 72);
+        assert_eq!(direction(&u, 0.0, &wide), -1.0);
+        let ahead = |view: &View| still_unknown_ahead(&u, 0.0, -1.0, 110f64.to_radians(), view);
+        assert!(!ahead(&wide) && ahead(&kinect));
     }
 }

@@ -110,7 +110,8 @@ pub struct DroneConfig {
     /// A whole look around on the spot takes this long, seconds.
     pub scan_s: f64,
     /// A look around turns the short way to what the map shows unknown around the drone, and
-    /// only as far as that ([`nav::sweep`]); `None`: a whole turn every time.
+    /// only as far as that ([`nav::sweep`]; the field of view is each drone's camera's once
+    /// its frames have told it); `None`: a whole turn every time.
     pub sweep: Option<View>,
     /// ... but lasts at least this long, seconds (the map lags the camera by up to a second).
     pub scan_min_s: f64,
@@ -278,6 +279,9 @@ pub struct Drone {
     disarmed_since: Option<f64>,
     /// Mission time of its last camera frame (none yet: no camera is watched).
     last_frame: Option<f64>,
+    /// Half its camera's horizontal field of view, radians, from the last frame's intrinsics
+    /// (none yet: the look around assumes [`DroneConfig::sweep`]'s).
+    camera_half_fov: Option<f64>,
     /// When the last LAND was sent (mission time), while landing.
     landing_since: Option<f64>,
     last_tick: Option<f64>,
@@ -340,6 +344,7 @@ impl Drone {
             lost_at: None,
             lost_since: None,
             last_frame: None,
+            camera_half_fov: None,
             disarmed_since: None,
             landing_since: None,
             last_tick: None,
@@ -519,9 +524,11 @@ impl Drone {
         self.sticks = Some(s);
     }
 
-    /// A camera frame of this drone reached the SLAM at mission time `now`.
-    pub fn camera_frame(&mut self, now: f64) {
+    /// A camera frame of this drone, its camera seeing `half_fov_rad` either side of its axis
+    /// ([`link::camera::Intrinsics::half_fov_x`]), reached the SLAM at mission time `now`.
+    pub fn camera_frame(&mut self, now: f64, half_fov_rad: f64) {
         self.last_frame = Some(self.last_frame.map_or(now, |t| t.max(now)));
+        self.camera_half_fov = Some(half_fov_rad);
     }
 
     /// The filter's pose (x, y, z, yaw) if valid.
@@ -906,21 +913,28 @@ impl Drone {
         config: &DroneConfig,
     ) -> Scan {
         let mut scan = Scan::new(now, pose[3], give_up);
-        if let (Some(view), Some(map)) = (&config.sweep, &self.map) {
-            let unknown = sweep::unknown_bearings(map, [pose[0], pose[1]], view, SWEEP_BEARINGS);
-            scan.direction = sweep::direction(&unknown, pose[3], view);
+        if let (Some(view), Some(map)) = (self.view(config), &self.map) {
+            let unknown = sweep::unknown_bearings(map, [pose[0], pose[1]], &view, SWEEP_BEARINGS);
+            scan.direction = sweep::direction(&unknown, pose[3], &view);
         }
         scan
+    }
+
+    /// What its camera sees for a look around: [`DroneConfig::sweep`] with the field of view
+    /// of its own camera, once a frame has told it; `None` for a whole turn.
+    fn view(&self, config: &DroneConfig) -> Option<View> {
+        let view = config.sweep?;
+        Some(self.camera_half_fov.map_or(view, |h| view.for_camera(h)))
     }
 
     /// Whether the look around `scan`, its heading goal `swept` radians on, has unknown
     /// bearings ahead of the camera still (always, without a map or with sweeps off).
     fn unknown_ahead(&self, here: [f64; 2], scan: &Scan, swept: f64, config: &DroneConfig) -> bool {
-        let (Some(view), Some(map)) = (&config.sweep, &self.map) else {
+        let (Some(view), Some(map)) = (self.view(config), &self.map) else {
             return true;
         };
-        let unknown = sweep::unknown_bearings(map, here, view, SWEEP_BEARINGS);
-        sweep::still_unknown_ahead(&unknown, scan.yaw0, scan.direction, swept, view)
+        let unknown = sweep::unknown_bearings(map, here, &view, SWEEP_BEARINGS);
+        sweep::still_unknown_ahead(&unknown, scan.yaw0, scan.direction, swept, &view)
     }
 
     fn explore_step(
@@ -1133,7 +1147,7 @@ mod tests {
         assert_eq!(drone.phase, Phase::Exploring);
         let mut t = 10.0;
         while t < 20.0 {
-            drone.camera_frame(t);
+            drone.camera_frame(t, 0.55);
             drone.tick(t, &config);
             t += 0.1;
         }
@@ -1388,11 +1402,21 @@ mod tests {
     }
 
     /// Looks around from (0, 0), facing +x, in a known 4 × 4 m room whose `unknown` cells
-    /// (x range, y range, metres) are not mapped, the heading following its goal; returns the
-    /// event that ended it, when, and the heading goal then.
-    fn look_around_in(unknown: Option<([f64; 2], [f64; 2])>) -> (DroneEvent, f64, f64) {
+    /// (x range, y range, metres) are not mapped, the heading following its goal, its camera's
+    /// frames (if any) telling their half field of view; returns the event that ended it,
+    /// when, and the heading goal then.
+    fn look_around_in(
+        unknown: Option<([f64; 2], [f64; 2])>,
+        camera_half_fov: Option<f64>,
+    ) -> (DroneEvent, f64, f64) {
         let config = DroneConfig::default();
         let mut drone = exploring_drone(Arc::default(), &config);
+        let frame = |drone: &mut Drone, t| {
+            if let Some(h) = camera_half_fov {
+                drone.camera_frame(t, h);
+            }
+        };
+        frame(&mut drone, 0.0);
         let mut map = Grid::new(80, 80, 0.05, [-2.0, -2.0], nav::Cell::Free);
         for i in 0..80 {
             for c in [(i, 0), (i, 79), (0, i), (79, i)] {
@@ -1414,6 +1438,7 @@ mod tests {
         let mut t = 0.0;
         loop {
             t += 0.1;
+            frame(&mut drone, t);
             drone.slam_fix(t, [0.0, 0.0, 0.9], drone.yaw_goal, None, false);
             if let Some(event) = drone.tick(t, &config) {
                 return (event, t, drone.yaw_goal);
@@ -1426,18 +1451,27 @@ mod tests {
     fn a_look_around_turns_the_short_way_to_the_unknown_and_no_further() {
         let config = DroneConfig::default();
         // The unknown to the right (south): a clockwise quarter turn, not a whole one.
-        let (event, t, yaw) = look_around_in(Some(([-0.3, 0.3], [-1.95, -1.0])));
+        let south = ([-0.3, 0.3], [-1.95, -1.0]);
+        let (event, t, yaw) = look_around_in(Some(south), None);
         assert_eq!(event, DroneEvent::GiveUp([1.0, 0.0]));
         assert!(yaw < -1.5 && yaw > -3.0, "clockwise past south: {yaw} rad");
         assert!(t < 0.6 * config.scan_s, "ended at {t} s");
+        // A Kinect's frames change nothing; a wider camera (60° each side) has seen it all
+        // sooner.
+        let kinect = link::camera::Intrinsics::kinect(640, 480).half_fov_x(640);
+        let (_, t_kinect, _) = look_around_in(Some(south), Some(kinect));
+        assert!((t_kinect - t).abs() < 0.15, "{t_kinect} s against {t} s");
+        let (_, t_wide, yaw_wide) = look_around_in(Some(south), Some(1.05));
+        assert!(yaw_wide < -1.5, "clockwise past south: {yaw_wide} rad");
+        assert!(t_wide < t - 0.5, "{t_wide} s against {t} s");
         // Nothing unknown: it holds for the map to catch up with the camera, then goes on.
-        let (_, t, _) = look_around_in(None);
+        let (_, t, _) = look_around_in(None, None);
         assert!(
             t >= config.scan_min_s && t < config.scan_min_s + 0.2,
             "ended at {t} s"
         );
         // The unknown on every side: the whole turn (until the view has met where it began).
-        let (_, t, yaw) = look_around_in(Some(([-1.95, 1.95], [-1.95, 1.95])));
+        let (_, t, yaw) = look_around_in(Some(([-1.95, 1.95], [-1.95, 1.95])), None);
         let half_fov = View::default().half_fov_rad;
         assert!(t > 0.8 * config.scan_s, "ended at {t} s");
         assert!(

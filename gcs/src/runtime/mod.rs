@@ -436,7 +436,7 @@ impl Mission {
                     let Some(d) = self.drones.get_mut(fix.drone) else {
                         continue;
                     };
-                    d.camera_frame(now);
+                    d.camera_frame(now, fix.half_fov_rad);
                     d.inliers = fix.inliers;
                     if let Some(pose) = fix.map_from_body {
                         let v = pose.translation.vector;

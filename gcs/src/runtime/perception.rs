@@ -205,6 +205,8 @@ pub struct SlamFix {
     pub inliers: Option<usize>,
     /// While lost: how the body moved since the drone's previous frame (visual odometry).
     pub odometry: Option<Odometry>,
+    /// Half the camera's horizontal field of view, radians (from the frame's intrinsics).
+    pub half_fov_rad: f64,
 }
 
 /// The SLAM's state for displays.
@@ -406,6 +408,7 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
                 _ => None,
             },
             odometry: report.odometry,
+            half_fov_rad: f.frame.intrinsics.half_fov_x(f.frame.width),
         });
         let processed = count.fetch_add(1, Ordering::Relaxed) + 1;
         let published = SlamView {
