@@ -28,6 +28,9 @@ struct Flight {
     truth: Vec<Vec<Stamped>>,
     lost: Vec<usize>,
     frames: Vec<usize>,
+    /// Frames reported [`Tracking::Weak`] (a pose not to fly on) and [`Tracking::Tracked`].
+    weak: Vec<usize>,
+    tracked: Vec<usize>,
     /// Give every frame the true body pose as the vehicle's prediction, this far (metres) off
     /// in height; `None`: no prediction (a hand-held camera).
     predicted_height_error: Option<f64>,
@@ -86,6 +89,8 @@ impl Flight {
             truth: vec![vec![]; drones],
             lost: vec![0; drones],
             frames: vec![0; drones],
+            weak: vec![0; drones],
+            tracked: vec![0; drones],
             predicted_height_error: None,
             lost_why: vec![],
             known_poses: false,
@@ -178,10 +183,15 @@ impl Flight {
                 })
                 .expect("frame");
             self.frames[k] += 1;
-            if let Tracking::Lost(why) = &report.tracking {
-                eprintln!("drone {} at {t:.1} s: lost: {why}", k + 1);
-                self.lost[k] += 1;
-                self.lost_why.push(why.clone());
+            match &report.tracking {
+                Tracking::Lost(why) => {
+                    eprintln!("drone {} at {t:.1} s: lost: {why}", k + 1);
+                    self.lost[k] += 1;
+                    self.lost_why.push(why.clone());
+                }
+                Tracking::Weak { .. } => self.weak[k] += 1,
+                Tracking::Tracked { .. } => self.tracked[k] += 1,
+                _ => {}
             }
             self.truth[k].push(Stamped {
                 t,
@@ -457,6 +467,46 @@ fn on_a_vehicle_registrations_off_its_measured_height_are_refused() {
         f
     };
     assert_refused_only_when_off(&run(0.0), &run(0.6), "off the predicted height");
+}
+
+#[test]
+fn on_a_vehicle_a_weak_registration_away_from_the_motion_is_not_to_be_flown_on() {
+    // Taking off and hovering, the vehicle's filter predicting its pose, with every
+    // registration counted as one on too few inliers: those that stray at all from the motion
+    // so far are reported weak (a pose the station must not fly on), and with a generous
+    // agreement none is. Nothing is built on a weak one, so the frame it follows stays the
+    // reference and tracking goes on.
+    let run = |agreement: (f64, f64)| {
+        let mut f = Flight::new(
+            1,
+            &[true],
+            SlamConfig {
+                keyframe_min_inliers: usize::MAX,
+                weak_agreement: agreement,
+                ..SlamConfig::default()
+            },
+        );
+        f.predicted_height_error = Some(0.0);
+        let (x, y, yaw) = start_of(&f, 0);
+        f.fly(&[vec![[x, y, 1.0, yaw]]], 10.0);
+        f.hold(&[[x, y, 1.0, yaw]], 2.0);
+        eprintln!(
+            "agreement {agreement:?}: {} frames, {} tracked, {} weak, {} lost",
+            f.frames[0], f.tracked[0], f.weak[0], f.lost[0]
+        );
+        f
+    };
+    let strict = run((0.0, 0.0));
+    assert_eq!(strict.tracked[0], 0, "every registration strays a little");
+    assert!(
+        strict.weak[0] * 10 >= strict.frames[0] * 9,
+        "{} of {} weak",
+        strict.weak[0],
+        strict.frames[0]
+    );
+    let lenient = run((1.0, 1.0));
+    assert_eq!(lenient.weak[0], 0);
+    assert!(lenient.tracked[0] * 10 >= lenient.frames[0] * 9);
 }
 
 /// `good` (a flight whose sensors tell the truth) lost at most 1 frame in 20; `off` (the same

@@ -438,7 +438,9 @@ impl Mission {
                     };
                     d.camera_frame(now, fix.half_fov_rad);
                     d.inliers = fix.inliers;
-                    if let Some(pose) = fix.map_from_body {
+                    if fix.weak {
+                        // Neither a pose to fly on nor a loss: the filter carries the pose on.
+                    } else if let Some(pose) = fix.map_from_body {
                         let v = pose.translation.vector;
                         let x = pose.rotation * nalgebra::Vector3::x();
                         d.slam_fix(

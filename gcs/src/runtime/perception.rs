@@ -203,6 +203,9 @@ pub struct SlamFix {
     /// camera sees: few, and the next frame may be lost, and its pose counts for less);
     /// `None` when relocalised, lost or placed at a known pose.
     pub inliers: Option<usize>,
+    /// The pose is a weak registration away from the motion so far ([`Tracking::Weak`]): the
+    /// drone is not flown on it (nor taken for lost).
+    pub weak: bool,
     /// While lost: how the body moved since the drone's previous frame (visual odometry).
     pub odometry: Option<Odometry>,
     /// Half the camera's horizontal field of view, radians (from the frame's intrinsics).
@@ -404,9 +407,10 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
             map_from_body: estimate.as_ref().and_then(RobotEstimate::map_from_body),
             keyframe: report.keyframe.is_some(),
             inliers: match report.tracking {
-                Tracking::Tracked { inliers } => Some(inliers),
+                Tracking::Tracked { inliers } | Tracking::Weak { inliers } => Some(inliers),
                 _ => None,
             },
+            weak: matches!(report.tracking, Tracking::Weak { .. }),
             odometry: report.odometry,
             half_fov_rad: f.frame.intrinsics.half_fov_x(f.frame.width),
         });
