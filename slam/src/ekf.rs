@@ -77,6 +77,11 @@ pub struct EkfConfig {
     pub gate_chi2: f64,
     /// The pose is valid while the position's standard deviation stays below this, metres.
     pub max_position_sigma: f64,
+    /// The horizontal velocity is known while its standard deviation stays below this, m/s:
+    /// visual odometry measures it while the position is lost (0.1 m/s each, but 0.3–0.4 s
+    /// late: about 0.3 m/s by now, with the gusts the model allows for); on the model alone it
+    /// grows past this in about a second.
+    pub max_velocity_sigma: f64,
     /// A SLAM fix this far (metres) and five standard deviations from a valid estimate is
     /// refused: loop-closure corrections are real jumps but bounded, a wild pose is not.
     pub max_slam_jump_m: f64,
@@ -108,6 +113,7 @@ impl Default for EkfConfig {
             attitude_sigma: 1f64.to_radians(),
             gate_chi2: 16.0,
             max_position_sigma: 0.35,
+            max_velocity_sigma: 0.4,
             max_slam_jump_m: 2.0,
             max_slam_height_error_m: 0.3,
         }
@@ -141,6 +147,8 @@ pub struct Estimate {
     pub yaw_rate: f64,
     /// Standard deviation of the horizontal position, metres.
     pub position_sigma: f64,
+    /// Standard deviation of the horizontal velocity, m/s.
+    pub velocity_sigma: f64,
 }
 
 /// What a measurement did.
@@ -357,6 +365,9 @@ impl Ekf {
             position_sigma: (0.5 * (self.p[(PX, PX)] + self.p[(PY, PY)]))
                 .max(0.0)
                 .sqrt(),
+            velocity_sigma: (0.5 * (self.p[(VX, VX)] + self.p[(VX + 1, VX + 1)]))
+                .max(0.0)
+                .sqrt(),
         }
     }
 
@@ -365,6 +376,15 @@ impl Ekf {
     pub fn valid_estimate(&self) -> Option<Estimate> {
         let e = self.estimate();
         (self.fixed && e.position_sigma <= self.config.max_position_sigma).then_some(e)
+    }
+
+    /// The horizontal velocity in the map (m/s), if known well enough to fly on
+    /// ([`EkfConfig::max_velocity_sigma`]) — also after the position is lost, as long as
+    /// something (visual odometry) measures it.
+    pub fn valid_velocity(&self) -> Option<[f64; 2]> {
+        let e = self.estimate();
+        (self.fixed && e.velocity_sigma <= self.config.max_velocity_sigma)
+            .then_some([e.velocity[0], e.velocity[1]])
     }
 
     /// Sets the sticks in force from now on.
@@ -789,7 +809,8 @@ mod tests {
         // Hovering with sticks centred, a draught carries the vehicle at 0.3 m/s (the model
         // knows nothing of it) for 20 s after its last SLAM fix. Visual odometry between
         // frames 0.1 s apart (1 cm of noise each, processed 0.3 s late) keeps the estimate
-        // valid and on the vehicle; without it the filter gives the pose up within seconds.
+        // valid and on the vehicle, and its velocity known (to brake a drift with); without it
+        // the filter gives the pose up within seconds, and the velocity sooner.
         let config = EkfConfig::default();
         let yaw = 0.7;
         let wind = [0.24, -0.18];
@@ -799,6 +820,7 @@ mod tests {
             ekf.update_slam(0.0, [0.0, 0.0, 0.9], yaw);
             let mut worst: f64 = 0.0;
             let mut valid_until = 0.0;
+            let (mut worst_velocity, mut velocity_until): (f64, f64) = (0.0, 0.0);
             for step in 1..=200 {
                 let t = f64::from(step) * 0.1;
                 ekf.predict(t);
@@ -820,16 +842,37 @@ mod tests {
                     let p = truth(t);
                     worst = worst.max((e.position[0] - p[0]).hypot(e.position[1] - p[1]));
                 }
+                match ekf.valid_velocity() {
+                    Some(v) => {
+                        velocity_until = t;
+                        if t >= 2.0 {
+                            let off = (v[0] - wind[0]).hypot(v[1] - wind[1]);
+                            worst_velocity = worst_velocity.max(off);
+                        }
+                    }
+                    None => assert!(
+                        !odometry || t < 1.0,
+                        "velocity lost at {t:.1} s: {:.3} m/s",
+                        ekf.estimate().velocity_sigma
+                    ),
+                }
             }
-            (valid_until, worst)
+            (valid_until, worst, velocity_until, worst_velocity)
         };
-        let (valid_until, worst) = run(true);
+        let (valid_until, worst, velocity_until, worst_velocity) = run(true);
         assert!(valid_until > 19.9, "given up at {valid_until:.1} s");
         assert!(worst < 0.15, "{worst:.3} m off");
-        let (valid_until, _) = run(false);
+        assert!(velocity_until > 19.9);
+        // Each measurement is up to 0.1 m/s off (1 cm in 0.1 s).
+        assert!(worst_velocity < 0.15, "{worst_velocity:.3} m/s off");
+        let (valid_until, _, velocity_until, _) = run(false);
         assert!(
             valid_until < 5.0,
             "valid until {valid_until:.1} s on the model alone"
+        );
+        assert!(
+            velocity_until < 2.0,
+            "velocity known until {velocity_until:.1} s on the model alone"
         );
     }
 

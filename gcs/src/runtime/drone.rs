@@ -128,6 +128,14 @@ pub struct DroneConfig {
     pub blind_turn_back_s: f64,
     /// Land after this long lost by the SLAM (on visual odometry, or blind), seconds.
     pub blind_land_s: f64,
+    /// With no pose but a velocity visual odometry still measures, the drift is braked (as
+    /// ArduPilot's FlowHold holds a drone on its optical-flow sensor): this much stick per m/s
+    /// against it, …
+    pub blind_brake_gain: f64,
+    /// … at most this much stick, …
+    pub blind_brake_max: f64,
+    /// … and nothing below this speed, m/s (the measurement's noise).
+    pub blind_brake_band: f64,
     /// Return to the start and land below this battery charge, percent.
     pub low_battery_pct: u8,
     /// An exploring drone whose camera has sent nothing for this long cannot map: it returns to
@@ -183,6 +191,9 @@ impl Default for DroneConfig {
             lost_back_m: 1.0,
             blind_turn_back_s: 10.0,
             blind_land_s: 30.0,
+            blind_brake_gain: 0.5,
+            blind_brake_max: 0.15,
+            blind_brake_band: 0.03,
             low_battery_pct: 25,
             camera_timeout_s: 5.0,
             home_reach_m: 0.3,
@@ -190,6 +201,22 @@ impl Default for DroneConfig {
             disarmed_landed_s: 2.0,
         }
     }
+}
+
+/// Roll and pitch sticks that brake a drone moving at `velocity` (map frame, m/s) while it
+/// heads `yaw` (radians): proportional, limited, and none for a speed within the band.
+fn brake(velocity: [f64; 2], yaw: f64, config: &DroneConfig) -> [f32; 2] {
+    let [vx, vy] = velocity;
+    if vx.hypot(vy) < config.blind_brake_band {
+        return [0.0; 2];
+    }
+    let (s, c) = yaw.sin_cos();
+    let (forward, left) = (c * vx + s * vy, -s * vx + c * vy);
+    let limit = config.blind_brake_max;
+    // + roll banks right (accelerates right, against a drift left); + pitch noses down.
+    let roll = (config.blind_brake_gain * left).clamp(-limit, limit);
+    let pitch = (-config.blind_brake_gain * forward).clamp(-limit, limit);
+    [roll as f32, pitch as f32]
 }
 
 /// A look around on the spot.
@@ -585,7 +612,18 @@ impl Drone {
     /// going back to the last keyframe) instead of on its model alone.
     pub fn slam_odometry(&mut self, since: f64, stamp: f64, previous_from_body: &Isometry3<f64>) {
         let d = previous_from_body.translation.vector;
-        self.ekf.update_odometry(since, stamp, [d.x, d.y]);
+        let update = self.ekf.update_odometry(since, stamp, [d.x, d.y]);
+        tracing::debug!(
+            drone = self.id + 1,
+            since,
+            stamp,
+            forward = d.x,
+            left = d.y,
+            ?update,
+            velocity = ?self.ekf.valid_velocity(),
+            pose = self.pose().is_some(),
+            "visual odometry while lost"
+        );
     }
 
     /// The filter's roll and pitch (radians): the attitude the vehicle reports, else what the
@@ -829,9 +867,10 @@ impl Drone {
         event
     }
 
-    /// No valid pose: hover level with altitude held (thesis Algorithm 7), climbing only to
-    /// finish a take-off, turning back to the heading of the last keyframe, then slowly round
-    /// so the camera sweeps over known views; land after too long.
+    /// No valid pose: hover level with altitude held (thesis Algorithm 7) — braking the drift
+    /// while visual odometry measures it — climbing only to finish a take-off, turning back to
+    /// the heading of the last keyframe, then slowly round so the camera sweeps over known
+    /// views; land after too long.
     fn fly_blind(
         &mut self,
         now: f64,
@@ -869,10 +908,15 @@ impl Drone {
             }
             _ => config.blind_yaw,
         };
+        // Level, unless visual odometry still measures how the drone drifts: then against it.
+        let [roll, pitch] = self.ekf.valid_velocity().map_or([0.0; 2], |v| {
+            brake(v, self.ekf.estimate().attitude[2], config)
+        });
         self.set_sticks(Sticks {
+            roll,
+            pitch,
             throttle: climb,
             yaw,
-            ..Sticks::CENTRED
         });
         None
     }
@@ -1360,6 +1404,56 @@ mod tests {
             drone.tick(t, &config);
             assert!(t < 5.0, "a pose without fixes or odometry must expire");
         }
+    }
+
+    #[test]
+    fn a_drone_without_a_pose_brakes_the_drift_its_camera_measures() {
+        let config = DroneConfig::default();
+        // Lost with nothing to measure its drift: the pose expires, the drone hovers level for
+        // a few seconds. Then its camera's consecutive frames (0.3 s late) measure the drift, at `forward` and
+        // `left` m/s (it faces +x): the sticks at the first tick its velocity is known again
+        // while its position is still not.
+        let braking = |forward: f64, left: f64| {
+            let mut drone = exploring_drone(Arc::default(), &config);
+            drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.0, None, true);
+            drone.slam_lost(0.2, &config);
+            let mut t = 0.2;
+            while drone.pose().is_some() {
+                t += 0.1;
+                drone.tick(t, &config);
+                assert!(t < 5.0, "a pose without fixes or odometry must expire");
+            }
+            // Blind for a few seconds: the position far from known.
+            let blind = t;
+            while t < blind + 3.0 {
+                t += 0.1;
+                drone.tick(t, &config);
+                let s = drone.sticks.expect("sticks");
+                assert_eq!((s.roll, s.pitch), (0.0, 0.0), "level");
+            }
+            for _ in 0..20 {
+                t += 0.1;
+                drone.slam_lost(t, &config);
+                let moved = Isometry3::translation(forward * 0.1, left * 0.1, 0.0);
+                drone.slam_odometry(t - 0.4, t - 0.3, &moved);
+                drone.tick(t, &config);
+                if drone.pose().is_none() && drone.ekf.valid_velocity().is_some() {
+                    return drone.sticks.expect("sticks");
+                }
+            }
+            panic!("the velocity was never known without the position");
+        };
+        // Drifting forward and left: nose up and banked right, within the limit.
+        let s = braking(0.2, 0.2);
+        let max = config.blind_brake_max as f32;
+        assert!(s.pitch < -0.02 && s.roll > 0.02, "{s:?}");
+        assert!(s.pitch >= -max && s.roll <= max, "{s:?}");
+        // Backward and right: the other way.
+        let s = braking(-0.2, -0.2);
+        assert!(s.pitch > 0.02 && s.roll < -0.02, "{s:?}");
+        // Still: level.
+        let s = braking(0.0, 0.0);
+        assert_eq!((s.roll, s.pitch), (0.0, 0.0), "within the band");
     }
 
     #[test]
