@@ -1398,31 +1398,32 @@ mod tests {
         let mut drone = exploring_drone(Arc::default(), &config);
         drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.5, None, true);
         drone.slam_lost(0.2, &config);
-        let mut t = 0.2;
+        tick_until_the_pose_expires(&mut drone, 0.2, &config);
+    }
+
+    /// Ticks a drone the SLAM has lost at `t`, with nothing to measure its motion, until its
+    /// pose expires (it must, within 5 s); returns the time then.
+    fn tick_until_the_pose_expires(drone: &mut Drone, mut t: f64, config: &DroneConfig) -> f64 {
         while drone.pose().is_some() {
             t += 0.1;
-            drone.tick(t, &config);
+            drone.tick(t, config);
             assert!(t < 5.0, "a pose without fixes or odometry must expire");
         }
+        t
     }
 
     #[test]
     fn a_drone_without_a_pose_brakes_the_drift_its_camera_measures() {
         let config = DroneConfig::default();
         // Lost with nothing to measure its drift: the pose expires, the drone hovers level for
-        // a few seconds. Then its camera's consecutive frames (0.3 s late) measure the drift, at `forward` and
-        // `left` m/s (it faces +x): the sticks at the first tick its velocity is known again
-        // while its position is still not.
+        // a few seconds. Then its camera's consecutive frames (0.3 s late) measure the drift,
+        // at `forward` and `left` m/s (it faces +x): the sticks at the first tick its velocity
+        // is known again while its position is still not.
         let braking = |forward: f64, left: f64| {
             let mut drone = exploring_drone(Arc::default(), &config);
             drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.0, None, true);
             drone.slam_lost(0.2, &config);
-            let mut t = 0.2;
-            while drone.pose().is_some() {
-                t += 0.1;
-                drone.tick(t, &config);
-                assert!(t < 5.0, "a pose without fixes or odometry must expire");
-            }
+            let mut t = tick_until_the_pose_expires(&mut drone, 0.2, &config);
             // Blind for a few seconds: the position far from known.
             let blind = t;
             while t < blind + 3.0 {
