@@ -15,6 +15,8 @@ use nav::local::{Follow, FollowerConfig, PathFollower, Pose2, wrap_angle};
 use nav::sweep::{self, View};
 use slam::ekf::{Ekf, EkfConfig, Input, Update};
 
+use super::perception::SlamFix;
+
 /// Bearings a look around checks for the unknown (5° apart).
 const SWEEP_BEARINGS: usize = 72;
 
@@ -563,6 +565,37 @@ impl Drone {
         self.ekf
             .valid_estimate()
             .map(|e| [e.position[0], e.position[1], e.position[2], e.attitude[2]])
+    }
+
+    /// What the SLAM made of one of this drone's camera frames, reaching the mission at `now`:
+    /// a pose to fly on, a loss (with visual odometry, if the camera still measured the
+    /// motion), or a weak registration ([`SlamFix::weak`]), which is neither: the filter
+    /// carries the pose on as between frames.
+    pub fn take_fix(&mut self, now: f64, fix: &SlamFix, config: &DroneConfig) {
+        self.camera_frame(now, fix.half_fov_rad);
+        self.inliers = fix.inliers;
+        if fix.weak {
+            return;
+        }
+        match fix.map_from_body {
+            Some(pose) => {
+                let v = pose.translation.vector;
+                let x = pose.rotation * nalgebra::Vector3::x();
+                self.slam_fix(
+                    fix.stamp,
+                    [v.x, v.y, v.z],
+                    x.y.atan2(x.x),
+                    fix.inliers,
+                    fix.keyframe,
+                );
+            }
+            None => {
+                self.slam_lost(fix.stamp, config);
+                if let Some(o) = &fix.odometry {
+                    self.slam_odometry(o.since, fix.stamp, &o.previous_from_body);
+                }
+            }
+        }
     }
 
     /// A SLAM pose of the body (position, heading) taken at `stamp`, registered on `inliers`
@@ -1399,6 +1432,51 @@ mod tests {
         drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.5, None, true);
         drone.slam_lost(0.2, &config);
         tick_until_the_pose_expires(&mut drone, 0.2, &config);
+    }
+
+    #[test]
+    fn a_weak_registration_neither_moves_the_drone_nor_loses_it() {
+        let config = DroneConfig::default();
+        let mut drone = exploring_drone(Arc::default(), &config);
+        let fix = |stamp: f64, x: f64, weak: bool| SlamFix {
+            drone: 0,
+            stamp,
+            map_from_body: Some(Isometry3::translation(x, 0.0, 0.9)),
+            keyframe: false,
+            inliers: Some(if weak { 15 } else { 120 }),
+            weak,
+            odometry: None,
+            half_fov_rad: 0.5,
+        };
+        let mut t = 0.1;
+        drone.take_fix(t, &fix(t, 0.0, false), &config);
+        drone.tick(t, &config);
+        // Weak registrations 0.5 m away, frame after frame: the filter stays where it was,
+        // and the drone is not taken for lost (it holds no spot to go back to).
+        for _ in 0..5 {
+            t += 0.1;
+            drone.take_fix(t, &fix(t, 0.5, true), &config);
+            drone.tick(t, &config);
+            let pose = drone.pose().expect("carried on between fixes");
+            assert!(pose[0].abs() < 0.05, "moved by a weak fix: {pose:?}");
+            assert_eq!((drone.lost_at, drone.lost_since), (None, None));
+            assert_eq!(drone.inliers, Some(15));
+        }
+        // The same pose, registered on enough, is flown on.
+        t += 0.1;
+        drone.take_fix(t, &fix(t, 0.5, false), &config);
+        drone.tick(t, &config);
+        let pose = drone.pose().expect("a fix");
+        assert!(pose[0] > 0.2, "a strong fix moves the filter: {pose:?}");
+        // No pose at all is a loss.
+        t += 0.1;
+        let lost = SlamFix {
+            map_from_body: None,
+            inliers: None,
+            ..fix(t, 0.0, false)
+        };
+        drone.take_fix(t, &lost, &config);
+        assert_eq!(drone.lost_since, Some(t));
     }
 
     /// Ticks a drone the SLAM has lost at `t`, with nothing to measure its motion, until its

@@ -436,26 +436,7 @@ impl Mission {
                     let Some(d) = self.drones.get_mut(fix.drone) else {
                         continue;
                     };
-                    d.camera_frame(now, fix.half_fov_rad);
-                    d.inliers = fix.inliers;
-                    if fix.weak {
-                        // Neither a pose to fly on nor a loss: the filter carries the pose on.
-                    } else if let Some(pose) = fix.map_from_body {
-                        let v = pose.translation.vector;
-                        let x = pose.rotation * nalgebra::Vector3::x();
-                        d.slam_fix(
-                            fix.stamp,
-                            [v.x, v.y, v.z],
-                            x.y.atan2(x.x),
-                            fix.inliers,
-                            fix.keyframe,
-                        );
-                    } else {
-                        d.slam_lost(fix.stamp, &self.config.drone);
-                        if let Some(o) = fix.odometry {
-                            d.slam_odometry(o.since, fix.stamp, &o.previous_from_body);
-                        }
-                    }
+                    d.take_fix(now, &fix, &self.config.drone);
                 }
             }
             if now >= next_control {
