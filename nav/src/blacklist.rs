@@ -7,6 +7,15 @@
 //! look around came while the map lagged, another drone was in the way): when nothing else is
 //! left, each such goal is tried once more before the mission ends. A goal given up twice is
 //! ignored for good.
+//!
+//! A look around the SLAM lost the map in is no look at all: the camera never saw what the
+//! goal was for (in SITL, a goal in the corridor given up twice that way hid the only way on to
+//! 60 % of the apartment, and the mission called itself complete at 41 % coverage). Such a goal
+//! ([`Blacklist::look_cut`]) is set aside like one given up, but its second looks go on until it
+//! has failed [`MAX_TRIES`] times in all.
+
+/// At most this many failures of one goal, cut looks included, before it is ignored for good.
+pub const MAX_TRIES: u32 = 3;
 
 /// A goal given up, and how often.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -15,6 +24,8 @@ pub struct GivenUp {
     pub at: [f64; 2],
     /// How many times a robot gave it up.
     pub times: u32,
+    /// How many of those were looks around cut short by a lost map.
+    pub cut: u32,
     /// Released for its second look: the planner does not ignore it now.
     pub released: bool,
 }
@@ -38,6 +49,16 @@ impl Blacklist {
 
     /// A robot gave up the goal `at`: ignored from now on (again, if it had been released).
     pub fn give_up(&mut self, at: [f64; 2]) {
+        self.fail(at, false);
+    }
+
+    /// A robot's look around at the goal `at` was cut short by a lost map: ignored for now,
+    /// but not counted as a look at it (see the module's documentation).
+    pub fn look_cut(&mut self, at: [f64; 2]) {
+        self.fail(at, true);
+    }
+
+    fn fail(&mut self, at: [f64; 2], cut: bool) {
         let near = self
             .entries
             .iter_mut()
@@ -45,11 +66,13 @@ impl Blacklist {
         match near {
             Some(e) => {
                 e.times += 1;
+                e.cut += u32::from(cut);
                 e.released = false;
             }
             None => self.entries.push(GivenUp {
                 at,
                 times: 1,
+                cut: u32::from(cut),
                 released: false,
             }),
         }
@@ -64,9 +87,10 @@ impl Blacklist {
             .collect()
     }
 
-    /// Releases every goal given up only once, not yet released, that hides one of the frontier
-    /// goals in `hidden` (what the planner ignored, [`crate::Plan::ignored`]), for a second look;
-    /// returns how many (0: nothing left to retry).
+    /// Releases every goal given up only once (looks cut short not counted, fewer than
+    /// [`MAX_TRIES`] failures in all), not yet released, that hides one of the frontier goals in
+    /// `hidden` (what the planner ignored, [`crate::Plan::ignored`]), for a second look; returns
+    /// how many (0: nothing left to retry).
     pub fn second_look(&mut self, hidden: &[[f64; 2]]) -> usize {
         let r = self.radius_m;
         let mut n = 0;
@@ -74,7 +98,8 @@ impl Blacklist {
             let hides = hidden
                 .iter()
                 .any(|g| (e.at[0] - g[0]).hypot(e.at[1] - g[1]) <= r);
-            if e.times == 1 && !e.released && hides {
+            let looks = e.times - e.cut;
+            if looks <= 1 && e.times < MAX_TRIES && !e.released && hides {
                 e.released = true;
                 n += 1;
             }
@@ -106,6 +131,30 @@ impl Blacklist {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_look_cut_short_is_not_a_look_but_tries_are_bounded() {
+        let mut b = Blacklist::new(0.5);
+        let hidden = [[1.0, 1.0]];
+        // Two looks cut short by a lost map: still released for another.
+        b.look_cut([1.0, 1.0]);
+        assert_eq!(b.ignored(), vec![[1.0, 1.0]], "set aside for now");
+        assert_eq!(b.second_look(&hidden), 1);
+        b.look_cut([1.1, 1.0]);
+        assert_eq!((b.entries()[0].times, b.entries()[0].cut), (2, 2));
+        assert_eq!(b.second_look(&hidden), 1, "a cut look is not a look");
+        // A third failure of any kind is the last.
+        b.look_cut([1.0, 1.1]);
+        assert_eq!(b.second_look(&hidden), 0);
+        assert_eq!(b.ignored(), vec![[1.0, 1.0]]);
+        // One cut and one whole look that failed: one more look, as for a goal given up once.
+        let mut b = Blacklist::new(0.5);
+        b.look_cut([1.0, 1.0]);
+        b.give_up([1.0, 1.0]);
+        assert_eq!(b.second_look(&hidden), 1);
+        b.give_up([1.0, 1.0]);
+        assert_eq!(b.second_look(&hidden), 0, "two whole looks failed");
+    }
 
     #[test]
     fn a_goal_given_up_once_gets_one_second_look_then_is_ignored_for_good() {

@@ -331,6 +331,9 @@ pub struct Drone {
 pub enum DroneEvent {
     /// Give this frontier goal up for good (reached while its frontier stayed, or no progress).
     GiveUp([f64; 2]),
+    /// The look around at this frontier goal lost the map before it was over: set the goal
+    /// aside, but it was not looked at ([`nav::blacklist::Blacklist::look_cut`]).
+    LookCut([f64; 2]),
 }
 
 impl Drone {
@@ -1048,7 +1051,11 @@ impl Drone {
                 "look around over"
             );
             self.scan = None;
-            return scan.give_up.map(DroneEvent::GiveUp);
+            return scan.give_up.map(if scan.cut {
+                DroneEvent::LookCut
+            } else {
+                DroneEvent::GiveUp
+            });
         }
         if let Follow::Arrived = self.follow(pose) {
             self.follower.set_path(vec![]);
@@ -1675,8 +1682,8 @@ mod tests {
             assert_eq!(drone.tick(t, &config), None);
             assert_eq!(drone.yaw_goal, yaw);
         }
-        // …and once found again, the look around is over (its goal given up), long before
-        // its full turn's time.
+        // …and once found again, the look around is over (its goal set aside, but not as
+        // looked at), long before its full turn's time.
         let mut event = None;
         while event.is_none() {
             t += 0.1;
@@ -1684,7 +1691,7 @@ mod tests {
             event = drone.tick(t, &config);
             assert!(t < config.scan_s, "the look around went on");
         }
-        assert_eq!(event, Some(DroneEvent::GiveUp([1.0, 0.0])));
+        assert_eq!(event, Some(DroneEvent::LookCut([1.0, 0.0])));
         assert!(drone.scan.is_none());
     }
 

@@ -642,13 +642,24 @@ impl Mission {
                     phase: d.phase.name(),
                 });
             }
-            if let Some(DroneEvent::GiveUp(goal)) = event {
-                tracing::info!(
-                    drone = k + 1,
-                    ?goal,
-                    "frontier goal closed: reached or unreachable"
-                );
-                self.blacklist.give_up(goal);
+            match event {
+                Some(DroneEvent::GiveUp(goal)) => {
+                    tracing::info!(
+                        drone = k + 1,
+                        ?goal,
+                        "frontier goal closed: reached or unreachable"
+                    );
+                    self.blacklist.give_up(goal);
+                }
+                Some(DroneEvent::LookCut(goal)) => {
+                    tracing::info!(
+                        drone = k + 1,
+                        ?goal,
+                        "frontier goal set aside: its look around lost the map"
+                    );
+                    self.blacklist.look_cut(goal);
+                }
+                None => {}
             }
             let messages = self.drones[k].take_messages();
             let name = self.drones[k].name.clone();
