@@ -76,11 +76,19 @@ impl Pid {
     /// One update with `error` = setpoint − measurement after `dt` seconds. A non-finite error or
     /// a non-positive `dt` gives 0 and leaves the state alone.
     pub fn update(&mut self, error: f64, dt: f64) -> f64 {
+        let rate = self.previous.map_or(0.0, |p| (error - p) / dt);
+        self.update_with_rate(error, rate, dt)
+    }
+
+    /// One update as [`Pid::update`], with the error's rate of change given (m/s for a
+    /// position loop) instead of differenced from the last error. A non-finite rate gives no
+    /// derivative term.
+    pub fn update_with_rate(&mut self, error: f64, rate: f64, dt: f64) -> f64 {
         if !(error.is_finite() && dt.is_finite() && dt > 0.0) {
             return 0.0;
         }
         let g = self.gains;
-        let derivative = self.previous.map_or(0.0, |p| (error - p) / dt);
+        let derivative = if rate.is_finite() { rate } else { 0.0 };
         self.previous = Some(error);
         let mut integral = self.integral + error * dt;
         if g.ki != 0.0 {
@@ -187,6 +195,10 @@ pub struct Pose3 {
     pub yaw: f64,
 }
 
+/// A setpoint that moves this much further than the drone between two updates (metres) has
+/// jumped to a new target (a path's new carrot, a turn's hold point): it is not moving along.
+pub const SETPOINT_JUMP_M: f64 = 0.15;
+
 /// x/y/z/yaw PID controllers: a pose setpoint and a pose estimate in, sticks out.
 #[derive(Debug, Clone)]
 pub struct PositionController {
@@ -194,6 +206,8 @@ pub struct PositionController {
     y: Pid,
     z: Pid,
     yaw: Pid,
+    /// The last horizontal setpoint and estimate, for the derivative terms.
+    last: Option<([f64; 2], [f64; 2])>,
 }
 
 impl PositionController {
@@ -204,6 +218,7 @@ impl PositionController {
             y: Pid::new(gains.y),
             z: Pid::new(gains.z),
             yaw: Pid::new(gains.yaw),
+            last: None,
         }
     }
 
@@ -212,14 +227,42 @@ impl PositionController {
         for p in [&mut self.x, &mut self.y, &mut self.z, &mut self.yaw] {
             p.reset();
         }
+        self.last = None;
     }
 
     /// One update. The x and y loops run on the map-frame errors, and their outputs are rotated
     /// into the body frame by the current heading (so turning does not look like motion to the
     /// derivative terms); the heading error is wrapped, so −179.9° to 179.9° is a 0.2° turn.
+    ///
+    /// The derivative terms see a setpoint that jumped ([`SETPOINT_JUMP_M`]: a new target,
+    /// not one moving along with the drone) as standing still, so they brake the drone's own
+    /// motion rather than kick the sticks. (A setpoint that jumped 0.26 m from a turn's hold
+    /// point to the carrot, differenced, had pushed a drone at 0.69 of full stick for 0.2 s
+    /// away from both, toward a door's jamb.)
     pub fn update(&mut self, setpoint: &Pose3, estimate: &Pose3, dt: f64) -> StickCommand {
-        let ax = self.x.update(setpoint.x - estimate.x, dt);
-        let ay = self.y.update(setpoint.y - estimate.y, dt);
+        let target = [setpoint.x, setpoint.y];
+        let here = [estimate.x, estimate.y];
+        let rate = match self.last {
+            Some((target0, here0)) if dt > 0.0 => {
+                let led = [target[0] - target0[0], target[1] - target0[1]];
+                let moved = [here[0] - here0[0], here[1] - here0[1]];
+                if (led[0] - moved[0]).hypot(led[1] - moved[1]) > SETPOINT_JUMP_M {
+                    [-moved[0] / dt, -moved[1] / dt]
+                } else {
+                    [(led[0] - moved[0]) / dt, (led[1] - moved[1]) / dt]
+                }
+            }
+            _ => [0.0; 2],
+        };
+        if target.iter().chain(&here).all(|v| v.is_finite()) {
+            self.last = Some((target, here));
+        }
+        let ax = self
+            .x
+            .update_with_rate(setpoint.x - estimate.x, rate[0], dt);
+        let ay = self
+            .y
+            .update_with_rate(setpoint.y - estimate.y, rate[1], dt);
         let (s, c) = estimate.yaw.sin_cos();
         let forward = c * ax + s * ay;
         let left = -s * ax + c * ay;
@@ -380,5 +423,71 @@ mod tests {
             sizes[1..].iter().all(|m| (m - sizes[1]).abs() < 1e-9),
             "{sizes:?}"
         );
+    }
+
+    #[test]
+    fn a_setpoint_that_jumps_does_not_kick_the_sticks() {
+        // At rest 1 m behind a target straight ahead; the target jumps 0.3 m nearer (a turn's
+        // hold point after a carrot). It is still ahead: the sticks must still lead toward it,
+        // not away from it as the jump differenced would.
+        let mut pc = PositionController::new(PositionGains::default());
+        let est = Pose3 {
+            x: 0.0,
+            y: 0.0,
+            z: 1.0,
+            yaw: 0.0,
+        };
+        let far = Pose3 { x: 1.0, ..est };
+        for _ in 0..3 {
+            assert!(pc.update(&far, &est, 0.1).pitch > 0.0);
+        }
+        let near = Pose3 { x: 0.7, ..est };
+        let s = pc.update(&near, &est, 0.1);
+        assert!(s.pitch > 0.0 && s.roll.abs() < 1e-9, "{s:?}");
+        // Moving on at 0.5 m/s toward a target that jumps 0.5 m further: the derivative
+        // brakes that motion (PD 0.3, 0.6: 0.3 × 1.45 − 0.6 × 0.5), not the jump's 4.5 m/s.
+        let pd = PidGains::pid(0.3, 0.0, 0.6);
+        let mut pc = PositionController::new(PositionGains {
+            x: pd,
+            y: pd,
+            ..PositionGains::default()
+        });
+        pc.update(&far, &est, 0.1);
+        let moved = Pose3 { x: 0.05, ..est };
+        let s = pc.update(&Pose3 { x: 1.5, ..est }, &moved, 0.1);
+        assert!((s.pitch - (0.3 * 1.45 - 0.6 * 0.5)).abs() < 1e-9, "{s:?}");
+    }
+
+    #[test]
+    fn a_setpoint_moving_along_is_differenced_as_a_whole() {
+        // A carrot running ahead of a drone (1 cm further than it each tick): the same sticks
+        // as plain PID loops on the map errors.
+        let gains = PositionGains {
+            x: PidGains::pid(0.3, 0.02, 0.6),
+            y: PidGains::pid(0.3, 0.02, 0.6),
+            ..PositionGains::default()
+        };
+        let mut pc = PositionController::new(gains);
+        let (mut px, mut py) = (Pid::new(gains.x), Pid::new(gains.y));
+        for i in 0..20 {
+            let t = f64::from(i);
+            let est = Pose3 {
+                x: 0.05 * t,
+                y: 0.02 * t,
+                z: 1.0,
+                yaw: 0.0,
+            };
+            let sp = Pose3 {
+                x: 0.4 + 0.06 * t,
+                y: 0.1 + 0.02 * t,
+                ..est
+            };
+            let s = pc.update(&sp, &est, 0.1);
+            let (ax, ay) = (px.update(sp.x - est.x, 0.1), py.update(sp.y - est.y, 0.1));
+            assert!(
+                (s.pitch - ax).abs() < 1e-12 && (s.roll + ay).abs() < 1e-12,
+                "{i}: {s:?}"
+            );
+        }
     }
 }
