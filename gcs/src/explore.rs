@@ -174,6 +174,9 @@ pub struct Summary {
     pub frontiers_out_of_reach: usize,
     /// Frontier goals given up for good.
     pub goals_given_up: usize,
+    /// Of those, the ones still hiding a frontier at the end that no drone ever looked at
+    /// (every look around there lost the map): the map may end short behind them.
+    pub goals_never_seen: usize,
     /// Fraction of the free space reachable from the starts that the map knows as free.
     pub coverage: f64,
     /// How far the map's walls lie from the world's.
@@ -632,6 +635,7 @@ fn watch(
         exploration_time_s: report.mission_time_s,
         frontiers_out_of_reach: report.frontiers_out_of_reach,
         goals_given_up: report.goals_given_up,
+        goals_never_seen: report.goals_never_seen,
         coverage: grid
             .as_ref()
             .map_or(0.0, |g| coverage(&reachable, world, g)),
@@ -717,6 +721,10 @@ fn watch(
                 summary.frontiers_out_of_reach + summary.goals_given_up
             ) {
                 (true, 0) => "explored".to_owned(),
+                (true, _) if summary.goals_never_seen > 0 => format!(
+                    "explored as far as the map reaches, but it may end short: {} goal(s) never looked at (every look around there lost the map)",
+                    summary.goals_never_seen
+                ),
                 (true, _) => format!(
                     "explored as far as the map reaches ({} frontier(s) out of reach, {} goal(s) given up)",
                     summary.frontiers_out_of_reach, summary.goals_given_up

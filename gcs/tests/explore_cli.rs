@@ -232,6 +232,11 @@ fn two_drones_on_slam_poses_over_the_shield_protocol_map_and_land_safely() {
     if summary["completed"] == true && number(&summary["coverage"]) < 0.9 {
         assert!(left > 0.0, "{summary}");
     }
+    // Goals never looked at (every look there lost the map) are some of those given up.
+    assert!(
+        number(&summary["goals_never_seen"]) <= number(&summary["goals_given_up"]),
+        "{summary}"
+    );
     assert!(number(&summary["wall_error"]["cells"]) > 100.0, "{summary}");
     assert!(
         number(&summary["wall_error"]["within_0_1_m"]) >= 0.8,

@@ -199,6 +199,20 @@ pub struct Pose3 {
 /// jumped to a new target (a path's new carrot, a turn's hold point): it is not moving along.
 pub const SETPOINT_JUMP_M: f64 = 0.15;
 
+/// The derivative terms difference over at least this long, seconds: control ticks that come
+/// bunched (10 ms apart after a pause, under load) would turn a centimetre's wobble of the
+/// estimate into a metre per second.
+pub const DERIVATIVE_WINDOW_S: f64 = 0.05;
+
+/// The horizontal setpoint and estimate the derivative terms difference from.
+#[derive(Debug, Clone, Copy)]
+struct Reference {
+    target: [f64; 2],
+    here: [f64; 2],
+    /// Seconds since.
+    age: f64,
+}
+
 /// x/y/z/yaw PID controllers: a pose setpoint and a pose estimate in, sticks out.
 #[derive(Debug, Clone)]
 pub struct PositionController {
@@ -206,8 +220,11 @@ pub struct PositionController {
     y: Pid,
     z: Pid,
     yaw: Pid,
-    /// The last horizontal setpoint and estimate, for the derivative terms.
-    last: Option<([f64; 2], [f64; 2])>,
+    /// Where the derivative terms difference from: the latest update at least
+    /// [`DERIVATIVE_WINDOW_S`] ago…
+    reference: Option<Reference>,
+    /// …and the latest update, to be that once it is old enough.
+    recent: Option<Reference>,
 }
 
 impl PositionController {
@@ -218,7 +235,8 @@ impl PositionController {
             y: Pid::new(gains.y),
             z: Pid::new(gains.z),
             yaw: Pid::new(gains.yaw),
-            last: None,
+            reference: None,
+            recent: None,
         }
     }
 
@@ -227,7 +245,7 @@ impl PositionController {
         for p in [&mut self.x, &mut self.y, &mut self.z, &mut self.yaw] {
             p.reset();
         }
-        self.last = None;
+        (self.reference, self.recent) = (None, None);
     }
 
     /// One update. The x and y loops run on the map-frame errors, and their outputs are rotated
@@ -238,24 +256,43 @@ impl PositionController {
     /// not one moving along with the drone) as standing still, so they brake the drone's own
     /// motion rather than kick the sticks. (A setpoint that jumped 0.26 m from a turn's hold
     /// point to the carrot, differenced, had pushed a drone at 0.69 of full stick for 0.2 s
-    /// away from both, toward a door's jamb.)
+    /// away from both, toward a door's jamb.) They difference over at least
+    /// [`DERIVATIVE_WINDOW_S`], however close together the updates come.
     pub fn update(&mut self, setpoint: &Pose3, estimate: &Pose3, dt: f64) -> StickCommand {
         let target = [setpoint.x, setpoint.y];
         let here = [estimate.x, estimate.y];
-        let rate = match self.last {
-            Some((target0, here0)) if dt > 0.0 => {
-                let led = [target[0] - target0[0], target[1] - target0[1]];
-                let moved = [here[0] - here0[0], here[1] - here0[1]];
+        if dt > 0.0 {
+            for r in [&mut self.reference, &mut self.recent]
+                .into_iter()
+                .flatten()
+            {
+                r.age += dt;
+            }
+        }
+        if self.recent.is_some_and(|r| r.age >= DERIVATIVE_WINDOW_S) {
+            self.reference = self.recent;
+        }
+        let rate = match self.reference {
+            Some(from) if dt > 0.0 => {
+                let span = from.age;
+                let led = [target[0] - from.target[0], target[1] - from.target[1]];
+                let moved = [here[0] - from.here[0], here[1] - from.here[1]];
                 if (led[0] - moved[0]).hypot(led[1] - moved[1]) > SETPOINT_JUMP_M {
-                    [-moved[0] / dt, -moved[1] / dt]
+                    [-moved[0] / span, -moved[1] / span]
                 } else {
-                    [(led[0] - moved[0]) / dt, (led[1] - moved[1]) / dt]
+                    [(led[0] - moved[0]) / span, (led[1] - moved[1]) / span]
                 }
             }
             _ => [0.0; 2],
         };
         if target.iter().chain(&here).all(|v| v.is_finite()) {
-            self.last = Some((target, here));
+            let now = Reference {
+                target,
+                here,
+                age: 0.0,
+            };
+            self.reference.get_or_insert(now);
+            self.recent = Some(now);
         }
         let ax = self
             .x
@@ -456,6 +493,36 @@ mod tests {
         let moved = Pose3 { x: 0.05, ..est };
         let s = pc.update(&Pose3 { x: 1.5, ..est }, &moved, 0.1);
         assert!((s.pitch - (0.3 * 1.45 - 0.6 * 0.5)).abs() < 1e-9, "{s:?}");
+    }
+
+    #[test]
+    fn ticks_that_come_bunched_do_not_kick_the_sticks() {
+        // Flying at 0.5 m/s toward a target ahead, 0.1 s between ticks; then one tick 10 ms
+        // after the last, the estimate 1 cm off (a wobble). Differenced over the 10 ms it would
+        // read 1.5 m/s and brake at 0.9 of full stick; over the window it is a small change.
+        let pd = PidGains::pid(0.3, 0.0, 0.6);
+        let mut pc = PositionController::new(PositionGains {
+            x: pd,
+            y: pd,
+            ..PositionGains::default()
+        });
+        let at = |x: f64| Pose3 {
+            x,
+            y: 0.0,
+            z: 1.0,
+            yaw: 0.0,
+        };
+        let target = at(2.0);
+        let mut steady = 0.0;
+        for i in 0..5 {
+            steady = pc.update(&target, &at(0.05 * f64::from(i)), 0.1).pitch;
+        }
+        assert!((steady - (0.3 * 1.8 - 0.6 * 0.5)).abs() < 1e-9, "{steady}");
+        let bunched = pc.update(&target, &at(0.2 + 0.005 + 0.01), 0.01).pitch;
+        assert!((bunched - steady).abs() < 0.1, "{bunched} against {steady}");
+        // The next tick, 0.1 s on, differences from the bunched one, over 0.1 s as ever.
+        let next = pc.update(&target, &at(0.255), 0.1).pitch;
+        assert!((next - (0.3 * 1.745 - 0.6 * 0.4)).abs() < 1e-9, "{next}");
     }
 
     #[test]

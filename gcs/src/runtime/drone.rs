@@ -272,6 +272,9 @@ pub struct Drone {
     controller: PositionController,
     /// The frontier (or home) it flies to.
     pub goal: Option<[f64; 2]>,
+    /// The way its look around at `goal` must turn (+1 counter-clockwise, −1 clockwise), set by
+    /// the mission; `None`: the short way to the unknown.
+    look_turn: Option<f64>,
     progress: (f64, [f64; 2]),
     scan: Option<Scan>,
     hold: [f64; 2],
@@ -332,8 +335,9 @@ pub enum DroneEvent {
     /// Give this frontier goal up for good (reached while its frontier stayed, or no progress).
     GiveUp([f64; 2]),
     /// The look around at this frontier goal lost the map before it was over: set the goal
-    /// aside, but it was not looked at ([`nav::blacklist::Blacklist::look_cut`]).
-    LookCut([f64; 2]),
+    /// aside, but it was not looked at ([`nav::blacklist::Blacklist::look_cut`]). With the way
+    /// it turned (+1 counter-clockwise, −1 clockwise).
+    LookCut([f64; 2], f64),
 }
 
 impl Drone {
@@ -358,6 +362,7 @@ impl Drone {
             follower: PathFollower::new(config.follower.clone()),
             controller: PositionController::new(config.gains),
             goal: None,
+            look_turn: None,
             progress: (t, [x, y]),
             scan: None,
             hold: [x, y],
@@ -524,8 +529,15 @@ impl Drone {
         self.send(Command::Disarm);
     }
 
-    /// A new frontier goal and path from the mission planner (exploring drones only).
-    pub fn set_plan(&mut self, goal: Option<[f64; 2]>, path: Vec<[f64; 2]>, now: f64) {
+    /// A new frontier goal and path from the mission planner (exploring drones only), and the
+    /// way its look around there must turn (`None`: the short way to the unknown).
+    pub fn set_plan(
+        &mut self,
+        goal: Option<[f64; 2]>,
+        path: Vec<[f64; 2]>,
+        look_turn: Option<f64>,
+        now: f64,
+    ) {
         if self.phase != Phase::Exploring || self.scan.is_some() {
             return;
         }
@@ -535,6 +547,7 @@ impl Drone {
             self.progress = (now, [e.position[0], e.position[1]]);
         }
         self.goal = goal;
+        self.look_turn = look_turn;
         self.follower.set_path(path);
     }
 
@@ -1051,16 +1064,26 @@ impl Drone {
                 "look around over"
             );
             self.scan = None;
-            return scan.give_up.map(if scan.cut {
-                DroneEvent::LookCut
-            } else {
-                DroneEvent::GiveUp
+            return scan.give_up.map(|goal| {
+                if scan.cut {
+                    DroneEvent::LookCut(goal, scan.direction)
+                } else {
+                    DroneEvent::GiveUp(goal)
+                }
             });
         }
         if let Follow::Arrived = self.follow(pose) {
             self.follower.set_path(vec![]);
             let goal = self.goal.take();
-            self.scan = Some(self.look_around(now, pose, goal, config));
+            let mut scan = self.look_around(now, pose, goal, config);
+            if let Some(turn) = self.look_turn.take() {
+                tracing::info!(
+                    drone = self.id + 1,
+                    "its last look around here lost the map: this one turns the other way"
+                );
+                scan.direction = turn;
+            }
+            self.scan = Some(scan);
             self.hold = here;
             return None;
         }
@@ -1307,7 +1330,7 @@ mod tests {
         let config = DroneConfig::default();
         let mut drone = exploring_drone(Arc::default(), &config);
         // Facing +x, the path north: a turn on the spot.
-        drone.set_plan(Some([0.0, 3.0]), vec![[0.0, 0.0], [0.0, 3.0]], 0.0);
+        drone.set_plan(Some([0.0, 3.0]), vec![[0.0, 0.0], [0.0, 3.0]], None, 0.0);
         drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.0, None, false);
         drone.tick(0.1, &config);
         assert_eq!(drone.hold, [0.0, 0.0]);
@@ -1397,7 +1420,7 @@ mod tests {
     fn a_lost_drone_flies_on_visual_odometry_turns_back_sweeps_then_lands() {
         let config = DroneConfig::default();
         let mut drone = exploring_drone(Arc::default(), &config);
-        drone.set_plan(Some([5.0, 0.0]), vec![[0.0, 0.0], [5.0, 0.0]], 0.0);
+        drone.set_plan(Some([5.0, 0.0]), vec![[0.0, 0.0], [5.0, 0.0]], None, 0.0);
         drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.5, None, true);
         drone.slam_fix(0.2, [0.05, 0.0, 0.9], 0.0, None, false);
         drone.tick(0.2, &config);
@@ -1549,7 +1572,7 @@ mod tests {
         // x = 0.1 facing east; there the SLAM loses it.
         let lost_after_keyframe_at = |keyframe_x: f64| {
             let mut drone = exploring_drone(Arc::default(), &config);
-            drone.set_plan(Some([5.0, 0.0]), vec![[0.0, 0.0], [5.0, 0.0]], 0.0);
+            drone.set_plan(Some([5.0, 0.0]), vec![[0.0, 0.0], [5.0, 0.0]], None, 0.0);
             drone.slam_fix(0.1, [keyframe_x, 0.0, 0.9], 0.5, None, true);
             drone.slam_fix(0.2, [0.1, 0.0, 0.9], 0.0, None, false);
             drone.tick(0.2, &config);
@@ -1588,6 +1611,7 @@ mod tests {
     fn look_around_in(
         unknown: Option<([f64; 2], [f64; 2])>,
         camera_half_fov: Option<f64>,
+        look_turn: Option<f64>,
     ) -> (DroneEvent, f64, f64) {
         let config = DroneConfig::default();
         let mut drone = exploring_drone(Arc::default(), &config);
@@ -1614,7 +1638,8 @@ mod tests {
             }
         }
         drone.set_map(Arc::new(map));
-        drone.scan = Some(drone.look_around(0.0, [0.0, 0.0, 0.9, 0.0], Some([1.0, 0.0]), &config));
+        // Arrived at its goal: the look around begins with the first tick.
+        drone.set_plan(Some([1.0, 0.0]), vec![[0.0, 0.0]], look_turn, 0.0);
         let mut t = 0.0;
         loop {
             t += 0.1;
@@ -1632,32 +1657,44 @@ mod tests {
         let config = DroneConfig::default();
         // The unknown to the right (south): a clockwise quarter turn, not a whole one.
         let south = ([-0.3, 0.3], [-1.95, -1.0]);
-        let (event, t, yaw) = look_around_in(Some(south), None);
+        let (event, t, yaw) = look_around_in(Some(south), None, None);
         assert_eq!(event, DroneEvent::GiveUp([1.0, 0.0]));
         assert!(yaw < -1.5 && yaw > -3.0, "clockwise past south: {yaw} rad");
         assert!(t < 0.6 * config.scan_s, "ended at {t} s");
         // A Kinect's frames change nothing; a wider camera (60° each side) has seen it all
         // sooner.
         let kinect = link::camera::Intrinsics::kinect(640, 480).half_fov_x(640);
-        let (_, t_kinect, _) = look_around_in(Some(south), Some(kinect));
+        let (_, t_kinect, _) = look_around_in(Some(south), Some(kinect), None);
         assert!((t_kinect - t).abs() < 0.15, "{t_kinect} s against {t} s");
-        let (_, t_wide, yaw_wide) = look_around_in(Some(south), Some(1.05));
+        let (_, t_wide, yaw_wide) = look_around_in(Some(south), Some(1.05), None);
         assert!(yaw_wide < -1.5, "clockwise past south: {yaw_wide} rad");
         assert!(t_wide < t - 0.5, "{t_wide} s against {t} s");
         // Nothing unknown: it holds for the map to catch up with the camera, then goes on.
-        let (_, t, _) = look_around_in(None, None);
+        let (_, t, _) = look_around_in(None, None, None);
         assert!(
             t >= config.scan_min_s && t < config.scan_min_s + 0.2,
             "ended at {t} s"
         );
         // The unknown on every side: the whole turn (until the view has met where it began).
-        let (_, t, yaw) = look_around_in(Some(([-1.95, 1.95], [-1.95, 1.95])), None);
+        let (_, t, yaw) = look_around_in(Some(([-1.95, 1.95], [-1.95, 1.95])), None, None);
         let half_fov = View::default().half_fov_rad;
         assert!(t > 0.8 * config.scan_s, "ended at {t} s");
         assert!(
             yaw >= std::f64::consts::TAU - 2.0 * half_fov,
             "a whole turn: {yaw} rad"
         );
+    }
+
+    #[test]
+    fn a_look_around_told_which_way_turns_that_way() {
+        // The unknown to the south: the short way is clockwise, but the last look here lost
+        // the map turning so; counter-clockwise, past north and west, to south.
+        let south = ([-0.3, 0.3], [-1.95, -1.0]);
+        let (event, _, yaw) = look_around_in(Some(south), None, Some(1.0));
+        assert_eq!(event, DroneEvent::GiveUp([1.0, 0.0]));
+        assert!(yaw > 3.5, "counter-clockwise to south: {yaw} rad");
+        let (_, _, yaw) = look_around_in(Some(south), None, Some(-1.0));
+        assert!(yaw < -1.5 && yaw > -3.0, "clockwise past south: {yaw} rad");
     }
 
     #[test]
@@ -1691,7 +1728,7 @@ mod tests {
             event = drone.tick(t, &config);
             assert!(t < config.scan_s, "the look around went on");
         }
-        assert_eq!(event, Some(DroneEvent::LookCut([1.0, 0.0])));
+        assert_eq!(event, Some(DroneEvent::LookCut([1.0, 0.0], 1.0)));
         assert!(drone.scan.is_none());
     }
 

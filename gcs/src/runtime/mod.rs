@@ -242,6 +242,9 @@ pub struct MissionReport {
     pub frontiers_out_of_reach: usize,
     /// Frontier goals given up for good (reached while the frontier stayed, or no progress).
     pub goals_given_up: usize,
+    /// Of those, the ones that still hid a frontier at the end though no drone ever looked
+    /// around there whole: every look lost the map ([`Blacklist::never_seen`]).
+    pub goals_never_seen: usize,
     /// Per drone: name, final phase, distance flown by the filter, filter trajectory.
     pub drones: Vec<DroneReport>,
     /// The SLAM and what it saw.
@@ -311,6 +314,7 @@ impl Runtime {
             state: MissionState::Waiting,
             started: None,
             blacklist: Blacklist::new(PlannerConfig::default().blacklist_radius_m),
+            never_seen: 0,
             grid: None,
             frontiers: vec![],
             messages: vec![],
@@ -403,6 +407,8 @@ struct Mission {
     started: Option<f64>,
     /// Goals given up (each gets a second look before the mission completes).
     blacklist: Blacklist,
+    /// Goals given up that hid frontiers at the end, never looked at (see [`MissionReport`]).
+    never_seen: usize,
     grid: Option<Arc<Grid>>,
     frontiers: Vec<[f64; 2]>,
     messages: Vec<(f64, String)>,
@@ -512,6 +518,7 @@ impl Mission {
             mission_time_s: self.started.map_or(0.0, |s| end - s),
             frontiers_out_of_reach: self.frontiers.len(),
             goals_given_up: self.blacklist.len(),
+            goals_never_seen: self.never_seen,
             drones: self
                 .drones
                 .iter()
@@ -651,13 +658,13 @@ impl Mission {
                     );
                     self.blacklist.give_up(goal);
                 }
-                Some(DroneEvent::LookCut(goal)) => {
+                Some(DroneEvent::LookCut(goal, turn)) => {
                     tracing::info!(
                         drone = k + 1,
                         ?goal,
                         "frontier goal set aside: its look around lost the map"
                     );
-                    self.blacklist.look_cut(goal);
+                    self.blacklist.look_cut(goal, turn);
                 }
                 None => {}
             }
@@ -811,7 +818,8 @@ impl Mission {
             .collect();
         for (i, &k) in exploring.iter().enumerate() {
             let r = &plan.robots[i];
-            self.drones[k].set_plan(r.goal, r.path.clone(), now);
+            let look_turn = r.goal.and_then(|g| self.blacklist.look_turn(g));
+            self.drones[k].set_plan(r.goal, r.path.clone(), look_turn, now);
         }
         if let Some(r) = &self.recorder
             && now - self.last_plan_record >= 1.0
@@ -854,6 +862,22 @@ impl Mission {
                     self.blacklist.len()
                 ),
             );
+            let unseen = self.blacklist.never_seen(&plan.ignored);
+            if !unseen.is_empty() {
+                let at: Vec<String> = unseen
+                    .iter()
+                    .map(|g| format!("({:.1}, {:.1})", g[0], g[1]))
+                    .collect();
+                tracing::warn!(goals = ?unseen, "frontier goals never looked at");
+                self.say(
+                    now,
+                    format!(
+                        "the map may end short at {}: every look around there lost the map",
+                        at.join(", ")
+                    ),
+                );
+            }
+            self.never_seen = unseen.len();
             self.finish(Outcome::Completed);
         }
     }
