@@ -172,7 +172,7 @@ pub struct Summary {
     pub exploration_time_s: f64,
     /// Frontiers left at the end that no drone could reach on the map.
     pub frontiers_out_of_reach: usize,
-    /// Frontier goals given up for good.
+    /// Frontier goals given up that still hid a frontier when the mission ended.
     pub goals_given_up: usize,
     /// Of those, the ones still hiding a frontier at the end that no drone ever looked at
     /// (every look around there lost the map): the map may end short behind them.

@@ -134,6 +134,16 @@ impl Blacklist {
         release.len()
     }
 
+    /// The goals ignored now that hide one of the frontier goals in `hidden`: what the
+    /// map still had to explore behind goals given up.
+    pub fn hiding(&self, hidden: &[[f64; 2]]) -> Vec<[f64; 2]> {
+        self.entries
+            .iter()
+            .filter(|e| !e.released && self.hides(e, hidden))
+            .map(|e| e.at)
+            .collect()
+    }
+
     /// The goals that hide one of the frontier goals in `hidden` and were never looked at:
     /// every failure there was a look cut short by a lost map. A mission ending with some
     /// may have left a building's wing unseen behind them.
@@ -192,6 +202,21 @@ mod tests {
         assert_eq!(b.second_look(&hidden), 1);
         b.give_up([1.0, 1.0]);
         assert_eq!(b.second_look(&hidden), 0, "two whole looks failed");
+    }
+
+    #[test]
+    fn only_goals_that_still_hide_a_frontier_are_left_behind() {
+        let mut b = Blacklist::new(0.5);
+        b.give_up([1.0, 1.0]); // looked at: its frontier went away
+        b.give_up([4.0, 1.0]); // its frontier stayed
+        b.look_cut([8.0, 1.0], 1.0);
+        let hidden = [[4.2, 1.0], [8.0, 1.1]];
+        assert_eq!(b.hiding(&hidden), vec![[4.0, 1.0], [8.0, 1.0]]);
+        // Released for a second look, a goal hides nothing: the planner sees its frontier.
+        assert_eq!(b.second_look(&hidden), 2);
+        assert!(b.hiding(&hidden).is_empty());
+        b.give_up([4.0, 1.1]);
+        assert_eq!(b.hiding(&hidden), vec![[4.0, 1.0]]);
     }
 
     #[test]

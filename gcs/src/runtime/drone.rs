@@ -884,9 +884,20 @@ impl Drone {
             Some(map) => keep_clear(map, here, self.hold, &config.keep_clear),
             None => self.hold,
         };
+        // Holding a spot (a look around, a turn, found again after a loss), the derivative
+        // terms follow the spot, which stands still: they brake any motion, wherever
+        // `keep_clear` steers (steering from the drone's position, the steer point moves with
+        // it and shows nothing to brake: drones coasted on into walls at 0.4 m/s). Pursuing a
+        // carrot, they follow the steer point: the carrot moves with the drone anyway, and the
+        // push off a wall is not braked (following the carrot, drones flew nearer the walls).
+        let moving = if self.tracking {
+            self.setpoint
+        } else {
+            self.hold
+        };
         let setpoint = Pose3 {
-            x: self.setpoint[0],
-            y: self.setpoint[1],
+            x: moving[0],
+            y: moving[1],
             z: self.height_goal,
             yaw: self.yaw_goal,
         };
@@ -896,7 +907,9 @@ impl Drone {
             z: pose[2],
             yaw: pose[3],
         };
-        let mut c = self.controller.update(&setpoint, &estimate, dt);
+        let mut c = self
+            .controller
+            .update_steered(&setpoint, self.setpoint, &estimate, dt);
         // Near a wall the controller flies even a small error: its derivative term brakes.
         if !self.tracking
             && self.setpoint == self.hold
@@ -1322,6 +1335,35 @@ mod tests {
             setpoint[0] < 0.0 && setpoint[0] > -0.1,
             "out to {} m from the wall: {setpoint:?}",
             config.keep_clear.clearance_m
+        );
+    }
+
+    #[test]
+    fn a_drone_holding_its_spot_beside_a_wall_brakes_its_drift() {
+        let config = DroneConfig::default();
+        // A wall's face 0.4 m north of the line the drone drifts along: `keep_clear` shortens
+        // its lead there, so the steer point moves with the drone.
+        let mut map = Grid::new(80, 40, 0.05, [-3.0, -1.0], nav::Cell::Free);
+        for x in 0..80 {
+            map.set((x, 28), nav::Cell::Occupied); // y = 0.40–0.45
+        }
+        let mut drone = exploring_drone(Arc::default(), &config);
+        drone.set_map(Arc::new(map));
+        // Looking around its hold (0, 0), facing +x, coasting west at 0.4 m/s past it.
+        drone.scan = Some(Scan::new(0.0, 0.0, None));
+        drone.hold = [0.0, 0.0];
+        let mut sticks = vec![];
+        for i in 1..=6 {
+            let t = 0.1 * f64::from(i);
+            drone.slam_fix(t, [-0.3 - 0.4 * t, 0.0, 0.9], 0.0, None, false);
+            drone.tick(t, &config);
+            sticks.push(f64::from(drone.sticks.expect("sticks").pitch));
+        }
+        // Braked by the derivative (0.6 × 0.4 m/s) on top of the pull back to the hold.
+        let kd = config.gains.x.kd;
+        assert!(
+            sticks[2..].iter().all(|&p| p > kd * 0.4),
+            "back toward +x, against the drift: {sticks:?}"
         );
     }
 

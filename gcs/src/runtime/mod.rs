@@ -240,7 +240,9 @@ pub struct MissionReport {
     /// Frontiers the map still had at the last plan that no drone could reach (a mission
     /// "completed" with some left ended on what its map let it fly to).
     pub frontiers_out_of_reach: usize,
-    /// Frontier goals given up for good (reached while the frontier stayed, or no progress).
+    /// Frontier goals given up (reached while the frontier stayed, or no progress) that still
+    /// hid a frontier at the last plan: what the map had left behind them. A goal reached
+    /// whose frontier went away is not counted.
     pub goals_given_up: usize,
     /// Of those, the ones that still hid a frontier at the end though no drone ever looked
     /// around there whole: every look lost the map ([`Blacklist::never_seen`]).
@@ -314,6 +316,7 @@ impl Runtime {
             state: MissionState::Waiting,
             started: None,
             blacklist: Blacklist::new(PlannerConfig::default().blacklist_radius_m),
+            given_up_left: 0,
             never_seen: 0,
             grid: None,
             frontiers: vec![],
@@ -407,6 +410,8 @@ struct Mission {
     started: Option<f64>,
     /// Goals given up (each gets a second look before the mission completes).
     blacklist: Blacklist,
+    /// Goals given up that hid frontiers at the last plan (see [`MissionReport`]).
+    given_up_left: usize,
     /// Goals given up that hid frontiers at the end, never looked at (see [`MissionReport`]).
     never_seen: usize,
     grid: Option<Arc<Grid>>,
@@ -517,7 +522,7 @@ impl Mission {
             outcome,
             mission_time_s: self.started.map_or(0.0, |s| end - s),
             frontiers_out_of_reach: self.frontiers.len(),
-            goals_given_up: self.blacklist.len(),
+            goals_given_up: self.given_up_left,
             goals_never_seen: self.never_seen,
             drones: self
                 .drones
@@ -816,6 +821,7 @@ impl Mission {
             .iter()
             .map(|f| plan.inflated.center_of(f.goal))
             .collect();
+        self.given_up_left = self.blacklist.hiding(&plan.ignored).len();
         for (i, &k) in exploring.iter().enumerate() {
             let r = &plan.robots[i];
             let look_turn = r.goal.and_then(|g| self.blacklist.look_turn(g));
@@ -857,9 +863,9 @@ impl Mission {
             self.say(
                 now,
                 format!(
-                    "no reachable frontier left after {elapsed:.0} s ({} out of reach, {} goals given up): landing",
+                    "no reachable frontier left after {elapsed:.0} s ({} out of reach, {} hidden behind goals given up): landing",
                     self.frontiers.len(),
-                    self.blacklist.len()
+                    self.given_up_left
                 ),
             );
             let unseen = self.blacklist.never_seen(&plan.ignored);
