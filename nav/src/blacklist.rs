@@ -137,22 +137,24 @@ impl Blacklist {
     /// The goals ignored now that hide one of the frontier goals in `hidden`: what the
     /// map still had to explore behind goals given up.
     pub fn hiding(&self, hidden: &[[f64; 2]]) -> Vec<[f64; 2]> {
-        self.entries
-            .iter()
-            .filter(|e| !e.released && self.hides(e, hidden))
-            .map(|e| e.at)
-            .collect()
+        self.left_behind(hidden).map(|e| e.at).collect()
     }
 
     /// The goals that hide one of the frontier goals in `hidden` and were never looked at:
     /// every failure there was a look cut short by a lost map. A mission ending with some
     /// may have left a building's wing unseen behind them.
     pub fn never_seen(&self, hidden: &[[f64; 2]]) -> Vec<[f64; 2]> {
-        self.entries
-            .iter()
-            .filter(|e| e.cut == e.times && !e.released && self.hides(e, hidden))
+        self.left_behind(hidden)
+            .filter(|e| e.cut == e.times)
             .map(|e| e.at)
             .collect()
+    }
+
+    /// The entries ignored now that hide one of the frontier goals in `hidden`.
+    fn left_behind<'a>(&'a self, hidden: &'a [[f64; 2]]) -> impl Iterator<Item = &'a GivenUp> {
+        self.entries
+            .iter()
+            .filter(move |e| !e.released && self.hides(e, hidden))
     }
 
     /// Every goal given up, in the order first given up.
