@@ -7,10 +7,12 @@
 //! was a door jamb touched at 0.1–0.6 m/s, turning through the door or heading for a goal in it.
 //! Like PX4's collision prevention, [`keep_clear`] moves the setpoint so that it never leads
 //! toward a wall the map knows within `clearance_m` of the drone, and leads back out to that
-//! distance when the drone is nearer: the position controller's derivative term then brakes an
-//! approach in proportion to its speed. Near walls (a door) it also shortens the lead, so the
-//! drone goes through slowly: a drone at 0.5–0.7 m/s cutting through a door at a slant touched
-//! its jamb with the SLAM pose only 6 cm off.
+//! distance when the drone is nearer. Near walls (a door) it also shortens the lead, so the
+//! P term pushes less: a drone at 0.5–0.7 m/s cutting through a door at a slant touched its
+//! jamb with the SLAM pose only 6 cm off. The setpoint it gives is worked out from the drone's
+//! position, so it moves with the drone and no derivative term brakes a drift toward a wall;
+//! [`brake_toward_walls`] does, limiting the speed toward each wall near the drone to what can
+//! still stop short of it.
 
 use crate::grid::{Cell, Grid};
 
@@ -23,6 +25,15 @@ pub struct KeepClear {
     pub slow_within_m: f64,
     /// …the setpoint leads the drone by at most this much (a slower approach), metres.
     pub slow_lead_m: f64,
+    /// [`brake_toward_walls`]: a drone this near a wall (centre to wall) may not approach it
+    /// at all, metres…
+    pub stop_at_m: f64,
+    /// …and farther out it may approach at this many m/s per metre beyond that, 1/s…
+    pub approach_per_s: f64,
+    /// …any faster is braked with this much stick per m/s…
+    pub brake_gain: f64,
+    /// …up to this much stick.
+    pub brake_max: f64,
 }
 
 impl Default for KeepClear {
@@ -33,6 +44,12 @@ impl Default for KeepClear {
             clearance_m: 0.35,
             slow_within_m: 0.6,
             slow_lead_m: 0.2,
+            // 5 cm to spare; 0.15 m/s at the clearance, 0.5 m/s at 0.6 m: stopping from
+            // there takes about 0.3 m (a full stick tilts the drone 20°, and drag slows it).
+            stop_at_m: 0.25,
+            approach_per_s: 1.5,
+            brake_gain: 0.6,
+            brake_max: 0.3,
         }
     }
 }
@@ -91,6 +108,53 @@ pub fn keep_clear(
         lead = [lead[0] + scale * push[0], lead[1] + scale * push[1]];
     }
     [position[0] + lead[0], position[1] + lead[1]]
+}
+
+/// Sticks that brake a drone at `position` moving at `velocity` (map frame: metres, m/s)
+/// toward a wall the map knows faster than it could stop short of it: per side of the drone
+/// within `clearance_m` or `slow_within_m` of it, an approach faster than `approach_per_s`
+/// times its distance beyond `stop_at_m` is braked with `brake_gain` stick per m/s of the
+/// excess, away from that wall. The result is the map-frame x and y of a stick push (rotate it
+/// into the body frame), at most `brake_max` long; none for a drone moving along or away from
+/// the walls.
+///
+/// [`keep_clear`] takes the lead toward a wall out of the setpoint, but it steers from the
+/// drone's position: the setpoint moves with the drone and a controller's derivative term,
+/// differencing it, sees no motion to brake. A drone drifting toward a door's jamb at 0.3 m/s
+/// while it crossed the door 0.2 m off its path was not braked and touched the jamb (true
+/// poses); this is the brake, like PX4's collision prevention, which limits the speed toward
+/// an obstacle to what can still stop short of it.
+pub fn brake_toward_walls(
+    map: &Grid,
+    position: [f64; 2],
+    velocity: [f64; 2],
+    keep: &KeepClear,
+) -> [f64; 2] {
+    if !(keep.brake_gain > 0.0 && keep.brake_max > 0.0 && velocity.iter().all(|v| v.is_finite())) {
+        return [0.0; 2];
+    }
+    let within = keep.clearance_m.max(keep.slow_within_m);
+    let near = walls_near(map, position, within);
+    // Nearest first: the depth inside `within` orders the sides.
+    let sides = nearest_sides(near.into_iter().map(|(n, d)| (n, within - d)).collect());
+    let mut push = [0.0f64; 2];
+    for (n, depth) in sides {
+        let distance = within - depth;
+        let toward = -(velocity[0] * n[0] + velocity[1] * n[1]);
+        let allowed = keep.approach_per_s * (distance - keep.stop_at_m).max(0.0);
+        if toward > allowed {
+            let stick = (keep.brake_gain * (toward - allowed)).min(keep.brake_max);
+            push = [push[0] + stick * n[0], push[1] + stick * n[1]];
+        }
+    }
+    let length = push[0].hypot(push[1]);
+    if length > keep.brake_max {
+        push = [
+            push[0] * keep.brake_max / length,
+            push[1] * keep.brake_max / length,
+        ];
+    }
+    push
 }
 
 /// The nearest wall point on each side of the drone: the intrusions deepest first, each kept
@@ -167,6 +231,7 @@ mod tests {
             clearance_m,
             slow_within_m: 0.0,
             slow_lead_m: 0.0,
+            ..KeepClear::default()
         }
     }
 
@@ -265,6 +330,59 @@ mod tests {
         assert_eq!(keep_clear(&g, [1.3, 2.0], [1.3, 2.4], &keep), [1.3, 2.4]);
         // A lead shorter than that is kept.
         assert_eq!(keep_clear(&g, [1.5, 2.0], [1.5, 2.1], &keep), [1.5, 2.1]);
+    }
+
+    #[test]
+    fn an_approach_faster_than_can_stop_short_of_a_wall_is_braked() {
+        let g = wall_east(4.0);
+        let keep = KeepClear::default();
+        // 0.35 m from the wall's face, at 0.3 m/s toward it: 0.15 m/s over what may still stop
+        // short of it, braked away from the wall (−x) with 0.6 × 0.15 of stick.
+        let b = brake_toward_walls(&g, [1.65, 2.0], [0.3, 0.0], &keep);
+        assert!((b[0] + 0.09).abs() < 1e-9 && b[1].abs() < 1e-9, "{b:?}");
+        // The same speed along the wall, or away from it: no brake.
+        assert_eq!(
+            brake_toward_walls(&g, [1.65, 2.0], [0.0, 0.3], &keep),
+            [0.0; 2]
+        );
+        assert_eq!(
+            brake_toward_walls(&g, [1.65, 2.0], [-0.3, 0.0], &keep),
+            [0.0; 2]
+        );
+        // Slow enough to stop short of it; far from it; no velocity known.
+        assert_eq!(
+            brake_toward_walls(&g, [1.65, 2.0], [0.1, 0.0], &keep),
+            [0.0; 2]
+        );
+        assert_eq!(
+            brake_toward_walls(&g, [1.0, 2.0], [0.8, 0.0], &keep),
+            [0.0; 2]
+        );
+        assert_eq!(
+            brake_toward_walls(&g, [1.65, 2.0], [f64::NAN, 0.0], &keep),
+            [0.0; 2]
+        );
+        // At the wall, fast: as hard as allowed and no more.
+        let hard = brake_toward_walls(&g, [1.75, 2.0], [2.0, 0.5], &keep);
+        assert!((hard[0] + keep.brake_max).abs() < 1e-9 && hard[1].abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_drone_drifting_into_a_jamb_through_a_door_is_braked_toward_the_middle() {
+        // A wall across x = 2.0 with a door 0.8 m wide at y = 1.6–2.4; the drone crosses it
+        // 0.2 m off the middle, drifting toward the near jamb (+y) as it goes.
+        let mut g = Grid::new(80, 80, 0.05, [0.0, 0.0], Cell::Free);
+        for y in 0..80 {
+            let yc = (y as f64 + 0.5) * 0.05;
+            if !(1.6..2.4).contains(&yc) {
+                g.set((40, y), Cell::Occupied);
+            }
+        }
+        let keep = KeepClear::default();
+        let b = brake_toward_walls(&g, [2.02, 2.2], [0.5, 0.3], &keep);
+        assert!(b[1] < -0.05, "{b:?}");
+        // Nothing slows it along its way through.
+        assert!(b[0].abs() < 1e-9, "{b:?}");
     }
 
     #[test]

@@ -144,7 +144,8 @@ pub struct PositionGains {
 }
 
 impl Default for PositionGains {
-    /// Seed 002, Table 5.1.
+    /// Seed 002, Table 5.1. Not what the mission runtime flies: its gains, fitted to the
+    /// simulated drone, are `gcs::runtime::drone::DroneConfig`'s.
     fn default() -> Self {
         Self {
             x: PidGains::pid(0.1, 0.4, 4.0),

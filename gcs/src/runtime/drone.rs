@@ -9,7 +9,7 @@ use std::time::Duration;
 use link::{Command, CommandError, FlightMode, LinkState, Sticks, Telemetry, VehicleLink};
 use nalgebra::Isometry3;
 use nav::Grid;
-use nav::avoid::{KeepClear, keep_clear};
+use nav::avoid::{KeepClear, brake_toward_walls, keep_clear};
 use nav::control::{PidGains, Pose3, PositionController, PositionGains};
 use nav::local::{Follow, FollowerConfig, PathFollower, Pose2, wrap_angle};
 use nav::sweep::{self, View};
@@ -917,6 +917,16 @@ impl Drone {
         {
             (c.roll, c.pitch) = (0.0, 0.0);
         }
+        // An approach to a wall faster than can stop short of it is braked: `keep_clear`'s
+        // steer point moves with the drone, so the derivative terms see no drift toward a
+        // jamb while pursuing a carrot.
+        if let (Some(map), Some(velocity)) = (&self.map, self.ekf.valid_velocity()) {
+            let [bx, by] = brake_toward_walls(map, here, velocity, &config.keep_clear);
+            let (s, co) = estimate.yaw.sin_cos();
+            let (forward, left) = (co * bx + s * by, -s * bx + co * by);
+            c.pitch = (c.pitch + forward).clamp(-1.0, 1.0);
+            c.roll = (c.roll - left).clamp(-1.0, 1.0);
+        }
         if sweep {
             c.yaw = f64::from(config.blind_yaw);
         }
@@ -1365,6 +1375,44 @@ mod tests {
             sticks[2..].iter().all(|&p| p > kd * 0.4),
             "back toward +x, against the drift: {sticks:?}"
         );
+    }
+
+    #[test]
+    fn a_drone_drifting_toward_a_wall_along_its_path_is_braked() {
+        // A wall's face 0.55 m north of a path east along y = 0: farther than the clearance,
+        // so `keep_clear` only shortens the lead (its steer point moves with the drone).
+        let mut map = Grid::new(80, 40, 0.05, [-1.0, -1.0], nav::Cell::Free);
+        for x in 0..80 {
+            map.set((x, 31), nav::Cell::Occupied); // y = 0.55–0.60
+        }
+        let map = Arc::new(map);
+        // Facing east along it at 0.5 m/s, drifting north at 0.6 m/s, toward the wall: the
+        // roll stick at the last of six ticks.
+        let last_roll = |config: &DroneConfig| {
+            let mut drone = exploring_drone(Arc::default(), config);
+            drone.set_map(map.clone());
+            drone.set_plan(Some([3.0, 0.0]), vec![[0.0, 0.0], [3.0, 0.0]], None, 0.0);
+            for i in 1..=6 {
+                let t = 0.1 * f64::from(i);
+                drone.slam_fix(t, [0.5 * t, 0.6 * t - 0.26, 0.9], 0.0, None, false);
+                drone.tick(t, config);
+            }
+            assert!(drone.tracking, "pursuing its carrot");
+            f64::from(drone.sticks.expect("sticks").roll)
+        };
+        let config = DroneConfig::default();
+        let unbraked = DroneConfig {
+            keep_clear: KeepClear {
+                brake_gain: 0.0,
+                ..config.keep_clear
+            },
+            ..config.clone()
+        };
+        // 0.41 m from the wall at 0.39 m/s toward it (the filter's estimate), 0.14 m/s faster
+        // than can stop short of it: banked right (south), away from it, by about 0.6 × 0.14
+        // more.
+        let (braked, not) = (last_roll(&config), last_roll(&unbraked));
+        assert!(braked > not + 0.05, "braked {braked}, not {not}");
     }
 
     #[test]
