@@ -246,6 +246,19 @@ mod tests {
         g
     }
 
+    /// 4 m × 4 m of free space at 5 cm with a wall across x = 2.0–2.05 m and a door 0.8 m wide
+    /// in it at y = 1.6–2.4.
+    fn wall_with_a_door() -> Grid {
+        let mut g = Grid::new(80, 80, 0.05, [0.0, 0.0], Cell::Free);
+        for y in 0..80 {
+            let yc = (y as f64 + 0.5) * 0.05;
+            if !(1.6..2.4).contains(&yc) {
+                g.set((40, y), Cell::Occupied);
+            }
+        }
+        g
+    }
+
     #[test]
     fn far_from_walls_the_setpoint_is_left_alone() {
         let g = wall_east(4.0);
@@ -298,14 +311,7 @@ mod tests {
 
     #[test]
     fn a_door_with_room_on_both_sides_is_flown_through() {
-        // A wall across x = 2.0 with a door 0.8 m wide at y = 1.6–2.4.
-        let mut g = Grid::new(80, 80, 0.05, [0.0, 0.0], Cell::Free);
-        for y in 0..80 {
-            let yc = (y as f64 + 0.5) * 0.05;
-            if !(1.6..2.4).contains(&yc) {
-                g.set((40, y), Cell::Occupied);
-            }
-        }
+        let g = wall_with_a_door();
         // In the door's middle, 0.4 m from either jamb: nothing changes.
         assert_eq!(
             keep_clear(&g, [2.02, 2.0], [2.6, 2.0], &clearance(0.35)),
@@ -369,15 +375,9 @@ mod tests {
 
     #[test]
     fn a_drone_drifting_into_a_jamb_through_a_door_is_braked_toward_the_middle() {
-        // A wall across x = 2.0 with a door 0.8 m wide at y = 1.6–2.4; the drone crosses it
-        // 0.2 m off the middle, drifting toward the near jamb (+y) as it goes.
-        let mut g = Grid::new(80, 80, 0.05, [0.0, 0.0], Cell::Free);
-        for y in 0..80 {
-            let yc = (y as f64 + 0.5) * 0.05;
-            if !(1.6..2.4).contains(&yc) {
-                g.set((40, y), Cell::Occupied);
-            }
-        }
+        // The drone crosses the door 0.2 m off its middle, drifting toward the near jamb (+y)
+        // as it goes.
+        let g = wall_with_a_door();
         let keep = KeepClear::default();
         let b = brake_toward_walls(&g, [2.02, 2.2], [0.5, 0.3], &keep);
         assert!(b[1] < -0.05, "{b:?}");
