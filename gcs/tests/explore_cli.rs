@@ -77,10 +77,11 @@ fn two_drones_explore_the_default_world_land_and_write_their_outputs() {
         "{summary}"
     );
     assert!(number(&summary["exploration_time_s"]) < 400.0, "{summary}");
-    // On true poses the drones keep off the walls (`nav::avoid`), a setpoint that jumps kicks
-    // nothing, and a drone holding its spot beside a wall brakes (`nav::control`): no
-    // collision in 20 missions at `--speed 5`, two at once (5 in the same 20 without the
-    // brake).
+    // On true poses the drones keep off the walls and brake any approach to one faster than
+    // can stop short of it (`nav::avoid`), a setpoint that jumps kicks nothing, and a drone
+    // holding its spot beside a wall brakes (`nav::control`): no collision in 20 missions at
+    // `--speed 5` run one at a time, nor in 20 run two at once (2 in the same 20 without the
+    // approach brake).
     assert_eq!(summary["collisions"], 0, "{summary}");
     let drones = summary["drones"].as_array().expect("drones");
     assert_eq!(drones.len(), 2);
