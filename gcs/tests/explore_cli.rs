@@ -81,7 +81,8 @@ fn two_drones_explore_the_default_world_land_and_write_their_outputs() {
     // can stop short of it (`nav::avoid`), a setpoint that jumps kicks nothing, and a drone
     // holding its spot beside a wall brakes (`nav::control`): no collision in 20 missions at
     // `--speed 5` run one at a time, nor in 20 run two at once (2 in the same 20 without the
-    // approach brake).
+    // approach brake). Since drones beside doors are lent frontiers a thinner radius reaches
+    // (thinner paths flown more often): none in 10 one at a time, 1 in 10 two at once.
     assert_eq!(summary["collisions"], 0, "{summary}");
     let drones = summary["drones"].as_array().expect("drones");
     assert_eq!(drones.len(), 2);
