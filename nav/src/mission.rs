@@ -155,9 +155,9 @@ pub enum PlanError {
 /// else the last one — a map whose last frontiers lie behind a narrow door is explored with a
 /// thinner margin rather than declared complete; a robot that plan leaves without a frontier
 /// gets one a thinner configuration reaches and no other robot has (`lend_to_idle`). Each
-/// configuration first finds frontiers on its inflated map alone and reaches them; only when the last finds none at all does it try
-/// its last resorts, the frontiers found on the map grown by the thin margin
-/// ([`PlannerConfig::frontier_margin_m`]) and those looked at from afar
+/// configuration first finds frontiers on its inflated map alone and reaches them; only when
+/// the last finds none at all does it try its last resorts, the frontiers found on the map
+/// grown by the thin margin ([`PlannerConfig::frontier_margin_m`]) and those looked at from afar
 /// ([`PlannerConfig::view_range_m`]). Earlier, a wider margin would peek through every door it
 /// cannot pass instead of handing over to a thinner one that flies through; and with the thin
 /// margin always on, two-drone SLAM missions on the apartment completed less often (seeds
@@ -236,6 +236,7 @@ fn lend_to_idle(
         ..thinner.clone()
     };
     let thin = plan(map, &only_waiting, &config)?;
+    // Only the waiting robots had a pose in `thin`: the others hover there.
     for (r, planned) in thin.robots.into_iter().enumerate() {
         let (Some(f), Some(goal)) = (planned.frontier, planned.goal) else {
             continue;
@@ -243,7 +244,7 @@ fn lend_to_idle(
         let taken = busy
             .iter()
             .any(|b| (b[0] - goal[0]).hypot(b[1] - goal[1]) <= SAME_FRONTIER_M);
-        if !waiting[r] || taken {
+        if taken {
             continue;
         }
         step.frontiers.push(thin.frontiers[f].clone());
