@@ -621,22 +621,29 @@ mod tests {
         assert!(spread[0] < 2.0 && spread[1] > 3.0, "{spread:?}");
     }
 
-    #[test]
-    fn a_robot_left_without_a_frontier_gets_one_behind_a_door_only_a_thinner_radius_passes() {
-        // A hall open to the west, and to the north an unknown room behind a door 0.8 m wide:
-        // closed to a robot radius of 0.45 m, open to one of 0.25 m.
+    /// A hall 5.8 × 2.4 m open to the west, and to the north an unknown room behind a door
+    /// 0.8 m wide (x 4.0–4.8 m, y 2.5–2.6 m; closed to a robot radius of 0.45 m, open to one of
+    /// 0.25 m), of which the first `seen` rows (0.1 m each, x 3.6–5.2 m) are known free.
+    fn hall_and_room(seen: usize) -> Grid {
         let wall = "#".repeat(60);
         let room = format!("#{}#", "?".repeat(58));
+        let free = format!("{}{}{}", "#".repeat(36), ".".repeat(16), "#".repeat(8));
         let door = format!("{}{}{}", "#".repeat(40), ".".repeat(8), "#".repeat(12));
         let hall = format!("?{}#", ".".repeat(58));
         let rows: Vec<&str> = [wall.as_str()]
             .into_iter()
-            .chain([room.as_str(); 13])
+            .chain(std::iter::repeat_n(room.as_str(), 13 - seen))
+            .chain(std::iter::repeat_n(free.as_str(), seen))
             .chain([door.as_str()])
             .chain([hall.as_str(); 24])
             .chain([wall.as_str()])
             .collect();
-        let g = grid_with(&rows, 0.1);
+        grid_with(&rows, 0.1)
+    }
+
+    #[test]
+    fn a_robot_left_without_a_frontier_gets_one_behind_a_door_only_a_thinner_radius_passes() {
+        let g = hall_and_room(0);
         let robots = [Some([0.8, 1.5]), Some([4.4, 1.5])];
         let radius = |robot_radius_m| PlannerConfig {
             robot_radius_m,
@@ -670,23 +677,9 @@ mod tests {
 
     #[test]
     fn a_path_lent_by_a_thinner_radius_goes_through_the_middle_of_the_door_not_along_a_jamb() {
-        // The hall and the door of the test above, the room's first 0.6 m seen free; robot 1
-        // comes at the door (x 4.0–4.8 m, y 2.5–2.6 m) from the south-west, so the shortest
-        // path would round the west jamb.
-        let wall = "#".repeat(60);
-        let room = format!("#{}#", "?".repeat(58));
-        let seen = format!("{}{}{}", "#".repeat(36), ".".repeat(16), "#".repeat(8));
-        let door = format!("{}{}{}", "#".repeat(40), ".".repeat(8), "#".repeat(12));
-        let hall = format!("?{}#", ".".repeat(58));
-        let rows: Vec<&str> = [wall.as_str()]
-            .into_iter()
-            .chain([room.as_str(); 7])
-            .chain([seen.as_str(); 6])
-            .chain([door.as_str()])
-            .chain([hall.as_str(); 24])
-            .chain([wall.as_str()])
-            .collect();
-        let g = grid_with(&rows, 0.1);
+        // The room's first 0.6 m seen free; robot 1 comes at the door (x 4.0–4.8 m, y 2.5–2.6 m)
+        // from the south-west, so the shortest path would round the west jamb.
+        let g = hall_and_room(6);
         let radius = |robot_radius_m| PlannerConfig {
             robot_radius_m,
             min_frontier_cells: 2,
