@@ -695,15 +695,16 @@ mod tests {
                     .then(|| ax + (bx - ax) * (2.55 - ay) / (by - ay))
             })
         };
-        // Lent to robot 1 by the thin radius after the wide one: through the door's middle,
-        // 0.4 m from either jamb.
+        // Lent to robot 1 by the thin radius after the wide one: through the door's middle
+        // (0.4 m from either jamb), to the cell.
         let robots = [Some([0.8, 1.5]), Some([1.6, 0.6])];
         let p = plan_first_open(&g, &robots, &[radius(0.45), radius(0.25)])
             .unwrap()
             .unwrap();
         let x = through_door(&p.robots[1].path).unwrap();
         assert!((x - 4.4).abs() < 0.06, "{x} in {:?}", p.robots[1].path);
-        // The thin radius alone keeps nothing more: it rounds the west jamb 0.25 m off.
+        // The thin radius alone keeps nothing more: it rounds the west jamb 0.3 m off (the
+        // 0.25 m inflation, to the cell).
         let p = plan_first_open(&g, &robots, &[radius(0.25)])
             .unwrap()
             .unwrap();
