@@ -230,6 +230,9 @@ pub struct DroneSummary {
     pub collisions: u32,
     /// The phase it ended in.
     pub final_phase: &'static str,
+    /// Why it left the mission before the end (its battery, its camera, its link, the SLAM,
+    /// its vehicle's failsafe, the operator); `null` for a drone that flew until it ended.
+    pub left_mission: Option<String>,
     /// RC override frames its vehicle received (MAVLink vehicles; `null` over the shield).
     pub rc_frames: Option<u64>,
     /// The gap between override frames that 99 % of gaps did not exceed, at the vehicle,
@@ -682,6 +685,7 @@ fn watch(
                     odometry_frames: perception.slam.estimate(k).map_or(0, |e| e.odometry_frames),
                     collisions: collisions[k],
                     final_phase: report.drones[k].phase.name(),
+                    left_mission: report.drones[k].left_mission.clone(),
                     rc_frames: rc.get(k).and_then(Option::as_ref).map(|r| r.frames),
                     rc_gap_p99_ms: rc
                         .get(k)
@@ -729,7 +733,15 @@ fn watch(
                     "explored as far as the map reaches ({} frontier(s) out of reach, {} goal(s) given up)",
                     summary.frontiers_out_of_reach, summary.goals_given_up
                 ),
-                (false, _) => "not finished".to_owned(),
+                (false, _) => {
+                    // Why: the outcome, and why each drone that left the mission left it.
+                    let why: Vec<String> = std::iter::once(summary.outcome.clone())
+                        .chain(summary.drones.iter().filter_map(|d| {
+                            d.left_mission.as_ref().map(|w| format!("drone {}: {w}", d.id))
+                        }))
+                        .collect();
+                    format!("not finished ({})", why.join("; "))
+                }
             },
             summary.exploration_time_s,
             summary.coverage * 100.0,

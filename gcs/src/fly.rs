@@ -71,6 +71,8 @@ struct FlyDrone {
     camera_frames: usize,
     lost_frames: usize,
     final_phase: &'static str,
+    /// Why it left the mission before the end; `null` if it flew until the end.
+    left_mission: Option<String>,
 }
 
 /// Runs `gcs fly`.
@@ -274,6 +276,7 @@ fn watch(args: &FlyArgs, fleet: &[Vehicle], runtime: Runtime) -> anyhow::Result<
                     camera_frames: e.as_ref().map_or(0, |e| e.frames),
                     lost_frames: e.as_ref().map_or(0, |e| e.lost_frames),
                     final_phase: d.phase.name(),
+                    left_mission: d.left_mission.clone(),
                 }
             })
             .collect(),

@@ -352,6 +352,11 @@ fn a_drone_whose_link_dies_is_landed_by_its_failsafe_and_the_other_finishes_the_
         summary["drones"][1]["final_phase"], "link lost",
         "{summary}"
     );
+    assert_eq!(
+        summary["drones"][1]["left_mission"], "link lost",
+        "{summary}"
+    );
+    assert!(summary["drones"][0]["left_mission"].is_null(), "{summary}");
     // The vehicle landed itself (GCS-heartbeat failsafe), the other landed when done.
     assert_eq!(summary["all_landed"], true, "{summary}");
     assert!(!out.join("mission.mcap").exists());
@@ -394,6 +399,15 @@ fn a_drone_whose_camera_dies_and_one_whose_battery_runs_low_go_home_and_the_thir
     for d in summary["drones"].as_array().expect("drones") {
         assert_eq!(d["final_phase"], "landed", "{d}");
     }
+    let left: Vec<&serde_json::Value> = summary["drones"]
+        .as_array()
+        .expect("drones")
+        .iter()
+        .map(|d| &d["left_mission"])
+        .collect();
+    assert!(left[0].is_null(), "{summary}");
+    assert_eq!(left[1], "no camera frame for 5 s", "{summary}");
+    assert_eq!(left[2], "battery at 20 %", "{summary}");
     std::fs::remove_dir_all(&out).ok();
 }
 

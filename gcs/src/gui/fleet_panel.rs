@@ -94,6 +94,12 @@ fn status(ui: &mut egui::Ui, d: &DroneView, card: &Card, now: f64) {
                 .color(phase_colour(d.phase)),
         );
     });
+    // Why it stopped exploring before the end (its battery, its camera, its link, …).
+    if let Some(why) = &d.left_mission {
+        ui.label(
+            RichText::new(format!("left the mission: {why}")).color(Color32::from_rgb(230, 140, 0)),
+        );
+    }
     // The link, with the age of the last message.
     ui.horizontal(|ui| {
         ui.label("link");

@@ -564,6 +564,7 @@ mod tests {
             id,
             name: format!("drone {}", id + 1),
             phase,
+            left_mission: None,
             link: LinkStatus {
                 state: link,
                 last_message_age: Some(Duration::from_millis(if link == LinkState::Lost {
@@ -641,6 +642,7 @@ mod tests {
         let mut d2 = drone(1, Phase::LinkLost, LinkState::Lost);
         d2.slam = RobotState::Lost;
         d2.pose = None;
+        d2.left_mission = Some("link lost".into());
         let (mut h, _rx) = window(snapshot(
             MissionState::Exploring,
             vec![drone(0, Phase::Exploring, LinkState::Connected), d2],
@@ -665,6 +667,9 @@ mod tests {
         h.get_by_label("lost");
         h.get_by_label("no pose");
         h.get_by_label_contains("11.4 V  46 %");
+        // Why drone 2 left the mission; drone 1 has not.
+        h.get_by_label("left the mission: link lost");
+        assert_eq!(h.get_all_by_label_contains("left the mission").count(), 1);
         // Messages.
         h.get_by_label_contains("drone 2: link lost");
     }

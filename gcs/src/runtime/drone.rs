@@ -327,6 +327,10 @@ pub struct Drone {
     pub path_length: f64,
     /// Messages for the operator since the last call of [`Drone::take_messages`].
     messages: Vec<String>,
+    /// Why it left the mission before the end (its battery, its camera, its link, the SLAM,
+    /// its vehicle's own failsafe, the operator): the first reason of this flight; `None`
+    /// while it explores, and for a drone that flew until the mission ended.
+    pub left_mission: Option<String>,
 }
 
 /// Something the drone's tick wants the mission to know.
@@ -390,6 +394,7 @@ impl Drone {
             trajectory: vec![],
             path_length: 0.0,
             messages: vec![],
+            left_mission: None,
         }
     }
 
@@ -415,6 +420,12 @@ impl Drone {
 
     fn say(&mut self, text: String) {
         self.messages.push(text);
+    }
+
+    /// Keeps why it leaves the mission, unless it already left for another reason
+    /// ([`Drone::left_mission`]).
+    pub fn leave_mission(&mut self, why: &str) {
+        self.left_mission.get_or_insert_with(|| why.to_owned());
     }
 
     /// Sends a command on its own thread; its answer is read by later ticks.
@@ -455,6 +466,7 @@ impl Drone {
             return;
         }
         self.phase = Phase::Arming;
+        self.left_mission = None;
         match self.start_sequence {
             StartSequence::Mavlink => {
                 self.link.set_sticks(Some(Sticks {
@@ -487,6 +499,7 @@ impl Drone {
         }
         match self.start {
             Some([x, y, _]) => {
+                self.leave_mission(why);
                 self.say(format!("{why}: returning to its start"));
                 self.phase = Phase::Returning;
                 self.goal = Some([x, y]);
@@ -494,6 +507,7 @@ impl Drone {
                 self.scan = None;
             }
             None => {
+                self.leave_mission(why);
                 self.say(format!("{why}: landing (its start is unknown)"));
                 self.land();
             }
@@ -723,6 +737,7 @@ impl Drone {
                     "link lost: its goal goes to the others; the vehicle's failsafe lands it"
                         .into(),
                 );
+                self.leave_mission("link lost");
                 self.lost_in = Some(self.phase);
                 self.phase = Phase::LinkLost;
                 self.goal = None;
@@ -735,6 +750,7 @@ impl Drone {
             let flying = telemetry.armed == Some(true) && telemetry.mode.as_deref() != Some("LAND");
             self.phase = if flying && before.flying() {
                 self.say("link back: resuming".into());
+                self.left_mission = None;
                 Phase::Exploring
             } else if telemetry.armed == Some(true) {
                 self.say("link back: the vehicle is landing by its failsafe".into());
@@ -758,6 +774,7 @@ impl Drone {
                     "the vehicle is landing on its own (LAND mode: its failsafe or its pilot)"
                         .into(),
                 );
+                self.leave_mission("its vehicle landed it (LAND mode)");
                 self.set_sticks(Sticks::CENTRED); // no stick may reposition it
                 self.phase = Phase::Landing;
                 self.goal = None;
@@ -767,6 +784,7 @@ impl Drone {
                 let since = *self.disarmed_since.get_or_insert(now);
                 if now - since >= config.disarmed_landed_s {
                     self.say("the vehicle disarmed on its own: landed".into());
+                    self.leave_mission("its vehicle disarmed");
                     self.disarmed_since = None;
                     self.phase = Phase::Landed;
                     self.goal = None;
@@ -837,10 +855,9 @@ impl Drone {
             .filter(|_| matches!(self.phase, Phase::Exploring | Phase::Returning));
         let lost_for = self.lost_since.map_or(0.0, |since| now - since);
         if lost.is_some() && lost_for > config.blind_land_s {
-            self.say(format!(
-                "lost by the SLAM for {:.0} s: landing where it is",
-                config.blind_land_s
-            ));
+            let why = format!("lost by the SLAM for {:.0} s", config.blind_land_s);
+            self.leave_mission(&why);
+            self.say(format!("{why}: landing where it is"));
             self.land();
             return None;
         }
@@ -955,10 +972,9 @@ impl Drone {
             .blind_since
             .get_or_insert(self.lost_since.map_or(now, |lost| lost.min(now)));
         if now - since > config.blind_land_s {
-            self.say(format!(
-                "no pose for {:.0} s: landing where it is",
-                config.blind_land_s
-            ));
+            let why = format!("no pose for {:.0} s", config.blind_land_s);
+            self.leave_mission(&why);
+            self.say(format!("{why}: landing where it is"));
             self.land();
             return None;
         }
@@ -1181,6 +1197,8 @@ mod tests {
         disarmed: std::sync::atomic::AtomicBool,
         mode: Mutex<Option<String>>,
         yaw: Mutex<Option<f32>>,
+        /// Its link reports itself lost.
+        lost: std::sync::atomic::AtomicBool,
     }
 
     impl VehicleLink for StubbornVehicle {
@@ -1213,7 +1231,11 @@ mod tests {
         }
         fn status(&self) -> LinkStatus {
             LinkStatus {
-                state: LinkState::Connected,
+                state: if self.lost.load(std::sync::atomic::Ordering::Relaxed) {
+                    LinkState::Lost
+                } else {
+                    LinkState::Connected
+                },
                 last_message_age: Some(std::time::Duration::from_millis(50)),
                 transport_up: true,
                 connections: 1,
@@ -1296,6 +1318,16 @@ mod tests {
                 .take_messages()
                 .iter()
                 .any(|m| m.contains("no camera frame for 5 s")),
+        );
+        assert_eq!(
+            drone.left_mission.as_deref(),
+            Some("no camera frame for 5 s")
+        );
+        // Home, landing there keeps why it left.
+        drone.land();
+        assert_eq!(
+            drone.left_mission.as_deref(),
+            Some("no camera frame for 5 s")
         );
     }
 
@@ -1547,6 +1579,10 @@ mod tests {
             drone.tick(t, &config);
         }
         assert_eq!(drone.phase, Phase::Landing, "lost for too long");
+        assert_eq!(
+            drone.left_mission.as_deref(),
+            Some("lost by the SLAM for 30 s")
+        );
         // Without odometry the same loss leaves no pose within seconds.
         let mut drone = exploring_drone(Arc::default(), &config);
         drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.5, None, true);
@@ -1846,6 +1882,7 @@ mod tests {
         }
         drone.tick(blind + config.blind_land_s + 0.5, &config);
         assert_eq!(drone.phase, Phase::Landing);
+        assert_eq!(drone.left_mission.as_deref(), Some("no pose for 30 s"));
         let waited = std::time::Instant::now();
         while !vehicle
             .commands
@@ -1878,6 +1915,10 @@ mod tests {
             .store(true, std::sync::atomic::Ordering::Relaxed);
         drone.tick(0.3, &config);
         assert_eq!(drone.phase, Phase::Landed);
+        assert_eq!(
+            drone.left_mission.as_deref(),
+            Some("its vehicle landed it (LAND mode)")
+        );
 
         // It disarms without a word (battery failsafe seen late, a pilot): landed after 2 s.
         let vehicle = Arc::new(StubbornVehicle::default());
@@ -1895,6 +1936,7 @@ mod tests {
         );
         drone.tick(10.0 + config.disarmed_landed_s + 0.1, &config);
         assert_eq!(drone.phase, Phase::Landed);
+        assert_eq!(drone.left_mission.as_deref(), Some("its vehicle disarmed"));
         // Flying again later, a first stale "disarmed" is not an old landing come back.
         drone.phase = Phase::TakingOff;
         drone.tick(12.5, &config);
@@ -1905,6 +1947,33 @@ mod tests {
                 .iter()
                 .any(|m| m.contains("disarmed on its own"))
         );
+    }
+
+    #[test]
+    fn a_drone_whose_link_comes_back_in_flight_rejoins_the_mission() {
+        let config = DroneConfig::default();
+        let vehicle = Arc::new(StubbornVehicle::default());
+        let mut drone = exploring_drone(vehicle.clone(), &config);
+        drone.tick(0.1, &config);
+        assert_eq!(drone.left_mission, None);
+        vehicle
+            .lost
+            .store(true, std::sync::atomic::Ordering::Relaxed);
+        drone.tick(0.2, &config);
+        assert_eq!(drone.phase, Phase::LinkLost);
+        assert_eq!(drone.left_mission.as_deref(), Some("link lost"));
+        // Back while still flying (armed, not in LAND): exploring again, nothing to report.
+        vehicle
+            .lost
+            .store(false, std::sync::atomic::Ordering::Relaxed);
+        drone.tick(0.3, &config);
+        assert_eq!(drone.phase, Phase::Exploring);
+        assert_eq!(drone.left_mission, None);
+        // A later reason is the one kept; the first of a flight wins over what follows.
+        drone.return_home("battery at 24 %");
+        drone.return_home("no camera frame for 5 s");
+        drone.land();
+        assert_eq!(drone.left_mission.as_deref(), Some("battery at 24 %"));
     }
 
     #[test]

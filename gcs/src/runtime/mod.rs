@@ -148,6 +148,9 @@ impl MissionState {
     }
 }
 
+/// Why a drone the operator sent home or landed left the mission ([`Drone::left_mission`]).
+const OPERATOR: &str = "the operator's command";
+
 /// Why a mission ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Outcome {
@@ -182,6 +185,8 @@ pub struct DroneView {
     pub name: String,
     /// What it does.
     pub phase: Phase,
+    /// Why it left the mission before the end ([`Drone::left_mission`]).
+    pub left_mission: Option<String>,
     /// Link health.
     pub link: LinkStatus,
     /// Latest telemetry.
@@ -260,6 +265,8 @@ pub struct DroneReport {
     pub name: String,
     /// Final phase.
     pub phase: Phase,
+    /// Why it left the mission before the end ([`Drone::left_mission`]).
+    pub left_mission: Option<String>,
     /// Distance flown according to the filter, metres.
     pub path_length_m: f64,
     /// The filter's trajectory: (time, [x, y, z, yaw]).
@@ -530,6 +537,7 @@ impl Mission {
                 .map(|d| DroneReport {
                     name: d.name.clone(),
                     phase: d.phase,
+                    left_mission: d.left_mission.clone(),
                     path_length_m: d.path_length,
                     trajectory: d.trajectory.clone(),
                 })
@@ -613,7 +621,12 @@ impl Mission {
                             self.started.get_or_insert(now);
                         }
                     }
-                    DroneCommand::Land => d.land(),
+                    DroneCommand::Land => {
+                        if d.phase.flying() {
+                            d.leave_mission(OPERATOR);
+                        }
+                        d.land();
+                    }
                     DroneCommand::Disarm => {
                         if matches!(d.phase, Phase::Idle | Phase::Landed) {
                             d.disarm();
@@ -621,7 +634,7 @@ impl Mission {
                     }
                     DroneCommand::Hold { height, yaw } => d.hold(height.clamp(0.3, 2.4), yaw),
                     DroneCommand::Explore => d.resume(),
-                    DroneCommand::ReturnHome => d.return_home("operator"),
+                    DroneCommand::ReturnHome => d.return_home(OPERATOR),
                 }
             }
         }
@@ -734,7 +747,15 @@ impl Mission {
                         .iter()
                         .any(|d| matches!(d.phase, Phase::Landed | Phase::LinkLost)) =>
             {
-                self.say(now, "no drone left flying".into());
+                let why: Vec<String> = self
+                    .drones
+                    .iter()
+                    .map(|d| match &d.left_mission {
+                        Some(why) => format!("{}: {why}", d.name),
+                        None => format!("{}: {}", d.name, d.phase.name()),
+                    })
+                    .collect();
+                self.say(now, format!("no drone left flying ({})", why.join("; ")));
                 self.state = MissionState::Done(Outcome::NoDroneLeft);
             }
             _ => {}
@@ -939,6 +960,7 @@ impl Mission {
                 id: k,
                 name: d.name.clone(),
                 phase: d.phase,
+                left_mission: d.left_mission.clone(),
                 link: d.link.status(),
                 telemetry: d.link.telemetry(),
                 pose: d.pose(),
