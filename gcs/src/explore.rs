@@ -737,7 +737,9 @@ fn watch(
                     // Why: the outcome, and why each drone that left the mission left it.
                     let why: Vec<String> = std::iter::once(summary.outcome.clone())
                         .chain(summary.drones.iter().filter_map(|d| {
-                            d.left_mission.as_ref().map(|w| format!("drone {}: {w}", d.id))
+                            d.left_mission
+                                .as_ref()
+                                .map(|w| format!("drone {}: {w}", d.id))
                         }))
                         .collect();
                     format!("not finished ({})", why.join("; "))

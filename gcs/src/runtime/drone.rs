@@ -497,9 +497,9 @@ impl Drone {
         if !self.phase.flying() || self.phase == Phase::Returning {
             return;
         }
+        self.leave_mission(why);
         match self.start {
             Some([x, y, _]) => {
-                self.leave_mission(why);
                 self.say(format!("{why}: returning to its start"));
                 self.phase = Phase::Returning;
                 self.goal = Some([x, y]);
@@ -507,7 +507,6 @@ impl Drone {
                 self.scan = None;
             }
             None => {
-                self.leave_mission(why);
                 self.say(format!("{why}: landing (its start is unknown)"));
                 self.land();
             }
