@@ -180,6 +180,9 @@ impl Default for DroneConfig {
             },
             follower: FollowerConfig {
                 lookahead_m: 0.4,
+                // Paths lie in known free space, so a bend of up to 90° is flown while the
+                // drone turns to it; only a sharper one is turned to on the spot first.
+                turn_threshold_rad: 90f64.to_radians(),
                 ..FollowerConfig::default()
             },
             ekf: EkfConfig::default(),
@@ -1450,12 +1453,14 @@ mod tests {
     fn a_drone_turning_toward_its_path_holds_where_the_turn_began() {
         let config = DroneConfig::default();
         let mut drone = exploring_drone(Arc::default(), &config);
-        // Facing +x, the path north: a turn on the spot.
+        // Facing 0.3 rad right of +x, the path north (107° off, more than a bend is flown
+        // through): a turn on the spot.
         drone.set_plan(Some([0.0, 3.0]), vec![[0.0, 0.0], [0.0, 3.0]], None, 0.0);
-        drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.0, None, false);
+        drone.slam_fix(0.1, [0.0, 0.0, 0.9], -0.3, None, false);
         drone.tick(0.1, &config);
         assert_eq!(drone.hold, [0.0, 0.0]);
-        // Coasting north along the path while it turns: held back, not carried along.
+        // Coasting north along the path while it turns (now 73° off, still turning until
+        // within 10°): held back, not carried along.
         drone.slam_fix(0.2, [0.0, 0.3, 0.9], 0.3, None, false);
         drone.tick(0.2, &config);
         assert_eq!(
@@ -1775,6 +1780,42 @@ mod tests {
             }
             assert!(t < config.scan_s + 1.0, "the look around went on");
         }
+    }
+
+    #[test]
+    fn a_drone_flies_on_through_a_bend_and_turns_on_the_spot_only_to_turn_back() {
+        let step = |bearing_deg: f64| {
+            let mut follower = PathFollower::new(DroneConfig::default().follower);
+            let (s, c) = bearing_deg.to_radians().sin_cos();
+            follower.set_path(vec![[0.0, 0.0], [2.0 * c, 2.0 * s]]);
+            follower.step(Some(Pose2 {
+                x: 0.0,
+                y: 0.0,
+                yaw: 0.0,
+            }))
+        };
+        // 60° off its heading: it flies toward the path while it turns.
+        assert!(
+            matches!(step(60.0), Follow::Track { .. }),
+            "{:?}",
+            step(60.0)
+        );
+        assert!(
+            matches!(step(-80.0), Follow::Track { .. }),
+            "{:?}",
+            step(-80.0)
+        );
+        // Behind it: it turns first, holding where it is.
+        assert!(
+            matches!(step(120.0), Follow::Turn { .. }),
+            "{:?}",
+            step(120.0)
+        );
+        assert!(
+            matches!(step(180.0), Follow::Turn { .. }),
+            "{:?}",
+            step(180.0)
+        );
     }
 
     #[test]
