@@ -175,6 +175,16 @@ impl Vehicle {
     fn is_ardupilot(&self) -> bool {
         self.autopilot == MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA
     }
+
+    /// The vehicle is in `custom_mode` (its heartbeat said so, or it accepted the change).
+    fn set_mode(&mut self, custom_mode: u32) {
+        self.custom_mode = custom_mode;
+        self.telemetry.mode = Some(if self.is_ardupilot() {
+            copter_mode_name(custom_mode)
+        } else {
+            format!("MODE({custom_mode})")
+        });
+    }
 }
 
 struct State {
@@ -881,16 +891,11 @@ fn handle_frame(shared: &Shared, frame: &RawFrame, now: Instant) {
         }
         v.monitor.heard(cfg.clock.now());
         v.autopilot = hb.autopilot;
-        v.custom_mode = hb.custom_mode;
+        v.set_mode(hb.custom_mode);
         v.telemetry.armed = Some(
             hb.base_mode
                 .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED),
         );
-        v.telemetry.mode = Some(if v.is_ardupilot() {
-            copter_mode_name(hb.custom_mode)
-        } else {
-            format!("MODE({})", hb.custom_mode)
-        });
         let component = v.component;
         s.mode_waits.retain(|w| {
             if w.target == sys && w.custom_mode == hb.custom_mode {
@@ -946,7 +951,17 @@ fn handle_frame(shared: &Shared, frame: &RawFrame, now: Instant) {
         let p = s.pending.remove(i);
         let accepted = ack.result == MavResult::MAV_RESULT_ACCEPTED;
         match p.done {
-            Done::Reply(_, tx) | Done::SetMode(_, _, tx) if accepted => {
+            Done::Reply(_, tx) if accepted => {
+                let _ = tx.send(Ok(()));
+            }
+            Done::SetMode(_, custom, tx) if accepted => {
+                // The vehicle is in the new mode from its acknowledgement on: its heartbeats
+                // before it (1 Hz; sent, on an ordered link, before the ack) told the old one,
+                // which a station would otherwise take as the mode for up to a second — a
+                // vehicle taking off again after a landing would still read LAND.
+                if let Some(v) = s.vehicles.get_mut(&sys) {
+                    v.set_mode(custom);
+                }
                 let _ = tx.send(Ok(()));
             }
             Done::SetMode(command, custom, tx)
