@@ -24,7 +24,7 @@ use gcs::fleet::{LinkKind, SimFleet, SimFleetConfig, sim_body_from_camera};
 use gcs::gui::Station;
 use gcs::outputs;
 use gcs::record::{Record, Recorder, Setup, SetupDrone};
-use gcs::runtime::drone::DroneConfig;
+use gcs::runtime::drone::{BatterySwap, DroneConfig};
 use gcs::runtime::{MissionState, Operator, Outcome, Runtime, RuntimeConfig};
 
 use crate::gui_cmd::{LogArgs, Window, WindowArgs, beside_window};
@@ -58,6 +58,11 @@ pub struct SimArgs {
     /// at 25 % left).
     #[arg(long, value_name = "MINUTES", default_value_t = 12.0)]
     pub flight_time: f64,
+    /// Swap batteries: a drone home for a low battery gets a charged one this many simulated
+    /// seconds after it lands (a simulated operator), then takes off again and rejoins the
+    /// exploration. Default: it stays down.
+    #[arg(long, value_name = "SECONDS")]
+    pub battery_swap: Option<f64>,
     /// Frontiers within this distance of each other, in sight, are one region, and drones are
     /// spread one to a region before any region gets a second, metres; 0: off (each frontier a
     /// region of its own).
@@ -228,6 +233,8 @@ pub struct DroneSummary {
     pub odometry_frames: usize,
     /// Wall collisions.
     pub collisions: u32,
+    /// Charged batteries it took off again on (`--battery-swap`).
+    pub battery_swaps: u32,
     /// The phase it ended in.
     pub final_phase: &'static str,
     /// Why it left the mission before the end (its battery, its camera, its link, the SLAM,
@@ -261,6 +268,11 @@ fn validate(args: &ExploreArgs) -> anyhow::Result<Vec<Fault>> {
             "--flight-time {} must be between 1 and 600 minutes",
             args.sim.flight_time
         );
+    }
+    if let Some(swap) = args.sim.battery_swap
+        && !(swap.is_finite() && (0.0..=3600.0).contains(&swap))
+    {
+        bail!("--battery-swap {swap} must be between 0 and 3600 seconds");
     }
     if !(args.sim.region_radius.is_finite() && (0.0..=50.0).contains(&args.sim.region_radius)) {
         bail!(
@@ -382,6 +394,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
         speed: args.sim.speed,
         seed: args.sim.seed,
         flight_time_s: args.sim.flight_time * 60.0,
+        battery_swap_s: args.sim.battery_swap,
         tlog_dir: (!args.log.no_log).then(|| args.out.clone()),
     })?;
     eprintln!(
@@ -436,6 +449,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
                     LookAround::Sweep => DroneConfig::default().sweep,
                     LookAround::Whole => None,
                 },
+                battery_swap: args.sim.battery_swap.map(|_| BatterySwap::default()),
                 ..DroneConfig::default()
             },
             // In the window the operator starts the mission (again, after a landing), and the
@@ -684,6 +698,7 @@ fn watch(
                     lost_frames: perception.slam.estimate(k).map_or(0, |e| e.lost_frames),
                     odometry_frames: perception.slam.estimate(k).map_or(0, |e| e.odometry_frames),
                     collisions: collisions[k],
+                    battery_swaps: report.drones[k].battery_swaps,
                     final_phase: report.drones[k].phase.name(),
                     left_mission: report.drones[k].left_mission.clone(),
                     rc_frames: rc.get(k).and_then(Option::as_ref).map(|r| r.frames),

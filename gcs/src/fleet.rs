@@ -52,6 +52,9 @@ pub struct SimFleetConfig {
     pub seed: u64,
     /// Each vehicle's flight time on one battery at hover, seconds.
     pub flight_time_s: f64,
+    /// A vehicle resting disarmed with a spent battery gets a charged one after this long,
+    /// seconds ([`sitl::vehicle::VehicleParams::battery_swap_s`]); `None`: never.
+    pub battery_swap_s: Option<f64>,
     /// Record each MAVLink vehicle's traffic to `droneK.tlog` here.
     pub tlog_dir: Option<std::path::PathBuf>,
 }
@@ -103,6 +106,7 @@ impl SimFleet {
                 camera_hz: 10.0,
                 vehicle: VehicleParams {
                     endurance_s: config.flight_time_s,
+                    battery_swap_s: config.battery_swap_s,
                     ..VehicleParams::default()
                 },
                 ..SimConfig::default()

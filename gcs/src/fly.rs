@@ -24,6 +24,7 @@ use gcs::fleet_file::{self, Vehicle};
 use gcs::gui::Station;
 use gcs::outputs;
 use gcs::record::{Record, Recorder, Setup, SetupDrone};
+use gcs::runtime::drone::{BatterySwap, DroneConfig};
 use gcs::runtime::drone::{DroneSpec, StartSequence};
 use gcs::runtime::perception::CameraFrame;
 use gcs::runtime::{Outcome, Runtime, RuntimeConfig};
@@ -46,6 +47,11 @@ pub struct FlyArgs {
     /// Print the summary as JSON on stdout.
     #[arg(long)]
     pub json: bool,
+    /// A drone that came home for a low battery waits there for a charged one (swapped while
+    /// its flight controller stays on) and takes off 5 s after it reads 90 % or more, to rejoin
+    /// the exploration. Default: it stays down.
+    #[arg(long)]
+    pub rejoin_after_battery_swap: bool,
     /// The mission log.
     #[command(flatten)]
     pub log: LogArgs,
@@ -73,6 +79,8 @@ struct FlyDrone {
     final_phase: &'static str,
     /// Why it left the mission before the end; `null` if it flew until the end.
     left_mission: Option<String>,
+    /// Charged batteries it took off again on (`--rejoin-after-battery-swap`).
+    battery_swaps: u32,
 }
 
 /// Runs `gcs fly`.
@@ -177,6 +185,10 @@ pub fn run_with(args: &FlyArgs, window: Option<Window>) -> anyhow::Result<()> {
             timeout: Some(args.timeout),
             auto_start: !waits,
             exit_when_done: !session,
+            drone: DroneConfig {
+                battery_swap: args.rejoin_after_battery_swap.then(BatterySwap::default),
+                ..DroneConfig::default()
+            },
             ..RuntimeConfig::default()
         },
         drones,
@@ -277,6 +289,7 @@ fn watch(args: &FlyArgs, fleet: &[Vehicle], runtime: Runtime) -> anyhow::Result<
                     lost_frames: e.as_ref().map_or(0, |e| e.lost_frames),
                     final_phase: d.phase.name(),
                     left_mission: d.left_mission.clone(),
+                    battery_swaps: d.battery_swaps,
                 }
             })
             .collect(),

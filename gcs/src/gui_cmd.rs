@@ -107,6 +107,8 @@ pub fn run(args: &GuiArgs) -> anyhow::Result<()> {
                 timeout: args.timeout,
                 out: args.out.clone(),
                 json: false,
+                // In the window the operator takes a drone off again after a swap.
+                rejoin_after_battery_swap: false,
                 log: args.log.clone(),
             },
             Some(window),

@@ -412,6 +412,69 @@ fn a_drone_whose_camera_dies_and_one_whose_battery_runs_low_go_home_and_the_thir
 }
 
 #[test]
+fn a_drone_home_for_its_battery_gets_a_charged_one_and_rejoins_the_exploration() {
+    // MAVLink reports the charge left; the shield only the pack's voltage.
+    for (link, low, charged) in [
+        ("mavlink", "battery at 20 %", "(100 %)"),
+        ("shield", "battery at 11.", " V)"),
+    ] {
+        let (summary, stderr, out) = explore(
+            &format!("swap-{link}"),
+            &[
+                "--link",
+                link,
+                "--drones",
+                "2",
+                "--speed",
+                "5",
+                "--timeout",
+                "500",
+                "--poses",
+                "truth",
+                "--fault",
+                "battery:2@40",
+                "--battery-swap",
+                "10",
+                "--no-log",
+            ],
+        );
+        let said = |what: &str| {
+            stderr
+                .find(what)
+                .unwrap_or_else(|| panic!("{link}: {what}: {stderr}"))
+        };
+        said(&format!("drone 2: {low}"));
+        said("returning to its start");
+        said("drone 2: landed: waiting for a charged battery to rejoin");
+        let replaced = stderr
+            .to_lowercase()
+            .find("drone 2 (vehicle): battery replaced");
+        assert!(replaced.is_some(), "{link}: {stderr}");
+        let rejoined = said("taking off in 5 s to rejoin");
+        assert!(
+            stderr[..rejoined].ends_with(&format!("{charged}: ")),
+            "{link}: {stderr}"
+        );
+        // It flew again: taking off a second time, after the swap.
+        assert!(
+            stderr[rejoined..].contains("drone 2: armed: taking off"),
+            "{link}: {stderr}"
+        );
+        assert_eq!(summary["completed"], true, "{link}: {summary}");
+        assert!(number(&summary["coverage"]) >= 0.95, "{link}: {summary}");
+        assert_eq!(summary["all_landed"], true, "{link}: {summary}");
+        let drones = summary["drones"].as_array().expect("drones");
+        assert_eq!(drones[0]["battery_swaps"], 0, "{link}: {summary}");
+        assert_eq!(drones[1]["battery_swaps"], 1, "{link}: {summary}");
+        for d in drones {
+            assert!(d["left_mission"].is_null(), "{link}: {d}");
+            assert_eq!(d["final_phase"], "landed", "{link}: {d}");
+        }
+        std::fs::remove_dir_all(&out).ok();
+    }
+}
+
+#[test]
 fn bad_explore_arguments_are_refused_before_anything_starts() {
     for (args, expected) in [
         (vec!["explore", "--drones", "9"], "must be 1 to 8"),
@@ -424,6 +487,10 @@ fn bad_explore_arguments_are_refused_before_anything_starts() {
         (
             vec!["explore", "--flight-time", "0.5"],
             "between 1 and 600 minutes",
+        ),
+        (
+            vec!["explore", "--battery-swap=-1"],
+            "must be between 0 and 3600 seconds",
         ),
         (
             vec!["explore", "--region-radius=-1"],

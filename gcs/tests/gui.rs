@@ -57,6 +57,7 @@ fn window_buttons_fly_the_simulated_fleet_and_show_a_lost_link() {
         speed: 3.0,
         seed: 1,
         flight_time_s: 720.0,
+        battery_swap_s: None,
         tlog_dir: None,
     })
     .expect("the simulated fleet starts");

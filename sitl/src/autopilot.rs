@@ -609,11 +609,17 @@ impl Autopilot {
         };
         vehicle.set_sticks(self.channel_map.sticks(&pulses));
         for e in events {
-            if let VehicleEvent::Collision(p) = e {
-                self.text(
+            match e {
+                VehicleEvent::Collision(p) => self.text(
                     MavSeverity::MAV_SEVERITY_CRITICAL,
                     &format!("Collision at ({:.2}, {:.2}, {:.2})", p[0], p[1], p[2]),
-                );
+                ),
+                VehicleEvent::BatterySwapped => {
+                    // A fresh battery clears the battery failsafe (a reboot does on ArduPilot).
+                    self.battery_failsafe = false;
+                    self.text(MavSeverity::MAV_SEVERITY_INFO, "Battery replaced");
+                }
+                VehicleEvent::Landed | VehicleEvent::TookOff => {}
             }
         }
         // LAND ends disarmed on the ground, however the vehicle got there: one that fell to the

@@ -74,6 +74,10 @@ struct RunArgs {
     /// Each vehicle's flight time on one battery at hover, minutes.
     #[arg(long, value_name = "MINUTES", default_value_t = 12.0)]
     flight_time: f64,
+    /// A simulated operator puts a charged battery in a vehicle that has rested disarmed this
+    /// many seconds with less than half its charge left (the link stays up); default: never.
+    #[arg(long, value_name = "SECONDS")]
+    battery_swap: Option<f64>,
     /// Stop after this many simulated seconds (default: run until interrupted).
     #[arg(long)]
     duration: Option<f64>,
@@ -225,6 +229,7 @@ fn run(args: RunArgs) -> anyhow::Result<()> {
             gust_mps: args.gust,
             vehicle: VehicleParams {
                 endurance_s: args.flight_time * 60.0,
+                battery_swap_s: args.battery_swap,
                 ..VehicleParams::default()
             },
             ..SimConfig::default()

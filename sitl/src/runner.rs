@@ -421,11 +421,13 @@ impl Endpoint for ShieldEndpoint {
         self.server.with(|e| {
             e.set_sensors(sensors);
             for ev in events {
-                if let VehicleEvent::Collision(p) = ev {
-                    e.report(&format!(
+                match ev {
+                    VehicleEvent::Collision(p) => e.report(&format!(
                         "collision at ({:.2}, {:.2}, {:.2})",
                         p[0], p[1], p[2]
-                    ));
+                    )),
+                    VehicleEvent::BatterySwapped => e.report("battery replaced"),
+                    VehicleEvent::Landed | VehicleEvent::TookOff => {}
                 }
             }
         });

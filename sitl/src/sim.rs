@@ -120,6 +120,13 @@ impl Sim {
                 "flight time {endurance} s must be at least a minute"
             )));
         }
+        if let Some(swap) = config.vehicle.battery_swap_s
+            && !(swap.is_finite() && (0.0..=3600.0).contains(&swap))
+        {
+            return Err(SimError::Config(format!(
+                "battery swap after {swap} s must be between 0 s and an hour"
+            )));
+        }
         let vehicles = (0..n)
             .map(|k| {
                 let [x, y] = world.starts()[k];
@@ -439,6 +446,17 @@ mod tests {
             };
             let e = Sim::new(world.clone(), 1, config).err().unwrap();
             assert!(e.to_string().contains("at least a minute"), "{e}");
+        }
+        for swap in [-1.0, f64::NAN, 1e9] {
+            let config = SimConfig {
+                vehicle: VehicleParams {
+                    battery_swap_s: Some(swap),
+                    ..VehicleParams::default()
+                },
+                ..SimConfig::default()
+            };
+            let e = Sim::new(world.clone(), 1, config).err().unwrap();
+            assert!(e.to_string().contains("battery swap"), "{e}");
         }
     }
 

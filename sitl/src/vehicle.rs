@@ -48,6 +48,10 @@ pub struct VehicleParams {
     pub battery_empty_v: f64,
     /// Flight time on one battery at hover, seconds.
     pub endurance_s: f64,
+    /// A simulated operator puts a charged battery in a vehicle that has rested disarmed on
+    /// the floor this long with less than half its charge left, seconds (a hot swap: the flight
+    /// controller stays on); `None`: batteries are never changed.
+    pub battery_swap_s: Option<f64>,
     /// The camera's position on the body (x forward, y left, z up), metres.
     pub camera_offset: [f64; 3],
 }
@@ -68,6 +72,7 @@ impl Default for VehicleParams {
             battery_full_v: 12.6,
             battery_empty_v: 10.5,
             endurance_s: 12.0 * 60.0,
+            battery_swap_s: None,
             camera_offset: [0.1, 0.0, 0.05],
         }
     }
@@ -107,6 +112,8 @@ pub enum VehicleEvent {
     Landed,
     /// It left the floor.
     TookOff,
+    /// A charged battery was put in ([`VehicleParams::battery_swap_s`]).
+    BatterySwapped,
 }
 
 /// One simulated multirotor and its stabilising flight controller.
@@ -122,6 +129,8 @@ pub struct Vehicle {
     guided_altitude: Option<f64>,
     wind: [f64; 2],
     in_contact: bool,
+    /// How long it has rested disarmed on the floor, seconds.
+    resting_s: f64,
     events: Vec<VehicleEvent>,
 }
 
@@ -151,6 +160,7 @@ impl Vehicle {
             guided_altitude: None,
             wind: [0.0; 2],
             in_contact: false,
+            resting_s: 0.0,
             events: vec![],
         }
     }
@@ -438,6 +448,19 @@ impl Vehicle {
         if s.armed {
             let rate = if s.landed { 0.1 } else { 1.0 } / p.endurance_s;
             s.consumed = (s.consumed + rate * h).min(1.0);
+        }
+        // A battery swap, once it has rested long enough for the operator to reach it.
+        self.resting_s = if !s.armed && s.landed {
+            self.resting_s + h
+        } else {
+            0.0
+        };
+        if let Some(swap_s) = p.battery_swap_s
+            && self.resting_s >= swap_s
+            && s.consumed > 0.5
+        {
+            s.consumed = 0.0;
+            self.events.push(VehicleEvent::BatterySwapped);
         }
     }
 }
@@ -786,6 +809,47 @@ mod tests {
         let down = cam.rotation * nalgebra::Vector3::y();
         assert!((down + nalgebra::Vector3::z()).norm() < 1e-9);
         assert!((cam.translation.vector - nalgebra::Vector3::new(1.0, 2.1, 0.05)).norm() < 1e-9);
+    }
+
+    #[test]
+    fn a_spent_battery_is_swapped_only_once_the_vehicle_has_rested_disarmed() {
+        let w = open_hall();
+        let params = VehicleParams {
+            battery_swap_s: Some(30.0),
+            ..VehicleParams::default()
+        };
+        let mut v = Vehicle::new(params.clone(), 5.0, 5.0, 0.0);
+        v.drain_battery(0.3);
+        // Armed on the floor: no one reaches for it.
+        v.set_armed(true);
+        let low = Sticks {
+            throttle: -1.0,
+            ..Sticks::CENTRED
+        };
+        fly(&mut v, &w, low, 40.0);
+        assert!(v.state().landed);
+        assert!(v.battery_remaining() <= 30);
+        // Disarmed: not before 30 s.
+        v.set_armed(false);
+        fly(&mut v, &w, Sticks::CENTRED, 29.0);
+        assert!(v.battery_remaining() <= 30);
+        assert!(!v.take_events().contains(&VehicleEvent::BatterySwapped));
+        fly(&mut v, &w, Sticks::CENTRED, 2.0);
+        assert_eq!(v.battery_remaining(), 100);
+        assert!((v.battery_voltage() - 12.6).abs() < 1e-9);
+        assert_eq!(v.take_events(), vec![VehicleEvent::BatterySwapped]);
+        // Half a battery or more left: kept. Off by default.
+        let mut half = Vehicle::new(params, 5.0, 5.0, 0.0);
+        half.drain_battery(0.6);
+        let mut never = Vehicle::new(VehicleParams::default(), 5.0, 5.0, 0.0);
+        never.drain_battery(0.1);
+        for v in [&mut half, &mut never] {
+            fly(v, &w, Sticks::CENTRED, 60.0);
+        }
+        assert_eq!(
+            (half.battery_remaining(), never.battery_remaining()),
+            (60, 10)
+        );
     }
 
     #[test]

@@ -13,6 +13,8 @@ use nav::avoid::{KeepClear, brake_toward_walls, keep_clear};
 use nav::control::{PidGains, Pose3, PositionController, PositionGains};
 use nav::local::{Follow, FollowerConfig, PathFollower, Pose2, wrap_angle};
 use nav::sweep::{self, View};
+
+use super::battery;
 use slam::ekf::{Ekf, EkfConfig, Input, Update};
 
 use super::perception::SlamFix;
@@ -138,8 +140,11 @@ pub struct DroneConfig {
     pub blind_brake_max: f64,
     /// … and nothing below this speed, m/s (the measurement's noise).
     pub blind_brake_band: f64,
-    /// Return to the start and land below this battery charge, percent.
-    pub low_battery_pct: u8,
+    /// When its battery is low (return to the start and land there) and when charged.
+    pub battery: battery::Limits,
+    /// Landed for a low battery, wait there for a charged one and rejoin the exploration;
+    /// `None`: stay down.
+    pub battery_swap: Option<BatterySwap>,
     /// An exploring drone whose camera has sent nothing for this long cannot map: it returns to
     /// its start and lands, and its goal goes to the others, seconds.
     pub camera_timeout_s: f64,
@@ -199,11 +204,37 @@ impl Default for DroneConfig {
             blind_brake_gain: 0.5,
             blind_brake_max: 0.15,
             blind_brake_band: 0.03,
-            low_battery_pct: 25,
+            battery: battery::Limits {
+                low_pct: 25,
+                // A LiPo cell under hover load; about 23 % left in the simulator's pack.
+                low_cell_v: 3.75,
+                low_for_s: 3.0,
+                charged_pct: 90,
+                charged_cell_v: 4.1,
+            },
+            battery_swap: None,
             camera_timeout_s: 5.0,
             home_reach_m: 0.3,
             land_retry_s: 20.0,
             disarmed_landed_s: 2.0,
+        }
+    }
+}
+
+/// How a drone home for a low battery gets back into the mission once a charged battery is in
+/// (an operator swapping it while the flight controller stays on, or the simulator's
+/// `--battery-swap`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BatterySwap {
+    /// The drone takes off this long after it reads a charged battery
+    /// ([`battery::Limits::charged_pct`]; hands clear of the propellers), seconds.
+    pub takeoff_delay_s: f64,
+}
+
+impl Default for BatterySwap {
+    fn default() -> Self {
+        Self {
+            takeoff_delay_s: 5.0,
         }
     }
 }
@@ -334,6 +365,15 @@ pub struct Drone {
     /// its vehicle's own failsafe, the operator): the first reason of this flight; `None`
     /// while it explores, and for a drone that flew until the mission ended.
     pub left_mission: Option<String>,
+    /// Landed (or on its way home) for a low battery, it waits for a charged one to rejoin
+    /// ([`DroneConfig::battery_swap`]).
+    pub awaits_battery: bool,
+    /// Since when it has read a charged battery while it waits, mission time.
+    charged_since: Option<f64>,
+    /// Its battery as read so far.
+    gauge: battery::Gauge,
+    /// Charged batteries it took off again on.
+    pub battery_swaps: u32,
 }
 
 /// Something the drone's tick wants the mission to know.
@@ -398,6 +438,10 @@ impl Drone {
             path_length: 0.0,
             messages: vec![],
             left_mission: None,
+            awaits_battery: false,
+            charged_since: None,
+            gauge: battery::Gauge::default(),
+            battery_swaps: 0,
         }
     }
 
@@ -429,6 +473,17 @@ impl Drone {
     /// ([`Drone::left_mission`]).
     pub fn leave_mission(&mut self, why: &str) {
         self.left_mission.get_or_insert_with(|| why.to_owned());
+    }
+
+    /// Why it is out of the mission, for displays: [`Drone::left_mission`], and whether it
+    /// waits for a charged battery to rejoin.
+    pub fn why_away(&self) -> Option<String> {
+        let why = self.left_mission.clone()?;
+        Some(if self.awaits_battery {
+            format!("{why} (waits for a charged battery to rejoin)")
+        } else {
+            why
+        })
     }
 
     /// Sends a command on its own thread; its answer is read by later ticks.
@@ -470,6 +525,8 @@ impl Drone {
         }
         self.phase = Phase::Arming;
         self.left_mission = None;
+        self.awaits_battery = false;
+        self.charged_since = None;
         match self.start_sequence {
             StartSequence::Mavlink => {
                 self.link.set_sticks(Some(Sticks {
@@ -480,6 +537,37 @@ impl Drone {
             }
             StartSequence::Shield => self.send(Command::Arm),
         }
+    }
+
+    /// Whether this drone, landed for a low battery, has now read a charged one for
+    /// [`BatterySwap::takeoff_delay_s`] at mission time `now`: then it has started taking off
+    /// to rejoin the exploration. The mission calls it only while it explores.
+    pub fn rejoin_after_swap(&mut self, now: f64, config: &DroneConfig) -> bool {
+        let battery = self.link.telemetry().battery;
+        let charged = match config.battery_swap {
+            Some(swap) if self.awaits_battery && self.phase == Phase::Landed => self
+                .gauge
+                .charged(battery.as_ref(), &config.battery)
+                .map(|reading| (swap, reading)),
+            _ => None,
+        };
+        let Some((swap, reading)) = charged else {
+            self.charged_since = None;
+            return false;
+        };
+        let since = *self.charged_since.get_or_insert_with(|| {
+            self.messages.push(format!(
+                "a charged battery ({reading}): taking off in {:.0} s to rejoin",
+                swap.takeoff_delay_s
+            ));
+            now
+        });
+        if now - since < swap.takeoff_delay_s {
+            return false;
+        }
+        self.battery_swaps += 1;
+        self.take_off();
+        true
     }
 
     /// Lands where it is (the vehicle lands and disarms by itself).
@@ -807,7 +895,11 @@ impl Drone {
                     self.phase = Phase::Landed;
                     self.link.set_sticks(None);
                     self.sticks = None;
-                    self.say("landed".into());
+                    self.say(if self.awaits_battery {
+                        "landed: waiting for a charged battery to rejoin".into()
+                    } else {
+                        "landed".into()
+                    });
                 } else if self.pending.is_none()
                     && now - *self.landing_since.get_or_insert(now) > config.land_retry_s
                 {
@@ -831,14 +923,16 @@ impl Drone {
             self.return_home(&format!("no camera frame for {:.0} s", now - last));
         }
         // Low battery: home.
-        if let Some(pct) = telemetry.battery.and_then(|b| b.remaining_pct)
-            && pct < config.low_battery_pct
+        if let Some(why) = self
+            .gauge
+            .low(now, telemetry.battery.as_ref(), &config.battery)
             && matches!(
                 self.phase,
                 Phase::Exploring | Phase::TakingOff | Phase::Holding
             )
         {
-            self.return_home(&format!("battery at {pct} %"));
+            self.awaits_battery = config.battery_swap.is_some();
+            self.return_home(&why);
         }
         let Some(pose) = self.pose() else {
             return self.fly_blind(
@@ -1201,6 +1295,8 @@ mod tests {
         yaw: Mutex<Option<f32>>,
         /// Its link reports itself lost.
         lost: std::sync::atomic::AtomicBool,
+        /// Battery charge it reports, percent.
+        battery_pct: Mutex<Option<u8>>,
     }
 
     impl VehicleLink for StubbornVehicle {
@@ -1224,6 +1320,14 @@ mod tests {
                     .unwrap_or_else(std::sync::PoisonError::into_inner)
                     .clone(),
                 height_m: Some(0.9),
+                battery: self
+                    .battery_pct
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner)
+                    .map(|pct| link::Battery {
+                        voltage_v: 11.0,
+                        remaining_pct: Some(pct),
+                    }),
                 yaw_rad: *self
                     .yaw
                     .lock()
@@ -1794,28 +1898,17 @@ mod tests {
                 yaw: 0.0,
             }))
         };
-        // 60° off its heading: it flies toward the path while it turns.
-        assert!(
-            matches!(step(60.0), Follow::Track { .. }),
-            "{:?}",
-            step(60.0)
-        );
-        assert!(
-            matches!(step(-80.0), Follow::Track { .. }),
-            "{:?}",
-            step(-80.0)
-        );
-        // Behind it: it turns first, holding where it is.
-        assert!(
-            matches!(step(120.0), Follow::Turn { .. }),
-            "{:?}",
-            step(120.0)
-        );
-        assert!(
-            matches!(step(180.0), Follow::Turn { .. }),
-            "{:?}",
-            step(180.0)
-        );
+        // Up to 90° off its heading it flies toward the path while it turns; behind it, it
+        // turns first, holding where it is.
+        for (bearing_deg, tracks) in [(60.0, true), (-80.0, true), (120.0, false), (180.0, false)] {
+            let follow = step(bearing_deg);
+            let turns = matches!(follow, Follow::Turn { .. });
+            let flies = matches!(follow, Follow::Track { .. });
+            assert!(
+                flies == tracks && turns != tracks,
+                "{bearing_deg}°: {follow:?}"
+            );
+        }
     }
 
     #[test]
@@ -1987,6 +2080,68 @@ mod tests {
                 .iter()
                 .any(|m| m.contains("disarmed on its own"))
         );
+    }
+
+    #[test]
+    fn a_drone_home_for_its_battery_rejoins_on_a_charged_one_only_when_told_to() {
+        for swap in [Some(BatterySwap::default()), None] {
+            let config = DroneConfig {
+                battery_swap: swap,
+                ..DroneConfig::default()
+            };
+            let vehicle = Arc::new(StubbornVehicle::default());
+            let battery = |pct: u8| *vehicle.battery_pct.lock().unwrap() = Some(pct);
+            let mut drone = exploring_drone(vehicle.clone(), &config);
+            battery(24);
+            drone.tick(0.1, &config);
+            // Home (it is at its start already): it lands, and the vehicle disarms.
+            assert_eq!(drone.phase, Phase::Landing);
+            assert_eq!(drone.left_mission.as_deref(), Some("battery at 24 %"));
+            assert_eq!(drone.awaits_battery, swap.is_some());
+            vehicle
+                .disarmed
+                .store(true, std::sync::atomic::Ordering::Relaxed);
+            drone.tick(1.0, &config);
+            assert_eq!(drone.phase, Phase::Landed);
+            let said = drone.take_messages().join("; ");
+            assert_eq!(
+                said.contains("waiting for a charged battery"),
+                swap.is_some()
+            );
+            let shown = drone.why_away().expect("away");
+            assert_eq!(
+                shown.contains("waits for a charged battery"),
+                swap.is_some()
+            );
+            // A battery that is not a charged one: it stays down.
+            battery(60);
+            assert!(!drone.rejoin_after_swap(2.0, &config));
+            // A charged one: it takes off 5 s after it first read it, not before.
+            battery(100);
+            let rejoined: Vec<f64> = [3.0, 7.9, 8.1]
+                .into_iter()
+                .filter(|&t| drone.rejoin_after_swap(t, &config))
+                .collect();
+            if swap.is_none() {
+                assert!(rejoined.is_empty());
+                assert_eq!(drone.phase, Phase::Landed);
+                assert_eq!(drone.left_mission.as_deref(), Some("battery at 24 %"));
+                continue;
+            }
+            assert_eq!(rejoined, [8.1]);
+            assert_eq!(drone.phase, Phase::Arming);
+            assert_eq!(drone.left_mission, None);
+            assert!(!drone.awaits_battery);
+            assert_eq!(drone.battery_swaps, 1);
+            assert!(
+                drone
+                    .take_messages()
+                    .iter()
+                    .any(|m| m.contains("a charged battery (100 %): taking off in 5 s"))
+            );
+            // Once in the air again, nothing more to rejoin.
+            assert!(!drone.rejoin_after_swap(20.0, &config));
+        }
     }
 
     #[test]

@@ -11,6 +11,7 @@
 //! valid pose hovers level at its altitude and lands if that lasts; a low battery sends it home;
 //! `land all` always works.
 
+pub mod battery;
 pub mod drone;
 pub mod perception;
 pub mod trail;
@@ -185,7 +186,7 @@ pub struct DroneView {
     pub name: String,
     /// What it does.
     pub phase: Phase,
-    /// Why it left the mission before the end ([`Drone::left_mission`]).
+    /// Why it left the mission before the end ([`Drone::why_away`]).
     pub left_mission: Option<String>,
     /// Link health.
     pub link: LinkStatus,
@@ -269,6 +270,8 @@ pub struct DroneReport {
     pub left_mission: Option<String>,
     /// Distance flown according to the filter, metres.
     pub path_length_m: f64,
+    /// Charged batteries it took off again on ([`DroneConfig::battery_swap`]).
+    pub battery_swaps: u32,
     /// The filter's trajectory: (time, [x, y, z, yaw]).
     pub trajectory: Vec<(f64, [f64; 4])>,
 }
@@ -539,6 +542,7 @@ impl Mission {
                     phase: d.phase,
                     left_mission: d.left_mission.clone(),
                     path_length_m: d.path_length,
+                    battery_swaps: d.battery_swaps,
                     trajectory: d.trajectory.clone(),
                 })
                 .collect(),
@@ -642,6 +646,14 @@ impl Mission {
 
     fn control(&mut self, now: f64) {
         for k in 0..self.drones.len() {
+            if self.state == MissionState::Exploring
+                && self.drones[k].rejoin_after_swap(now, &self.config.drone)
+            {
+                tracing::info!(
+                    drone = k + 1,
+                    "rejoins the exploration on a charged battery"
+                );
+            }
             let event = self.drones[k].tick(now, &self.config.drone);
             let d = &self.drones[k];
             let t = d.link.telemetry();
@@ -742,6 +754,7 @@ impl Mission {
             }
             MissionState::Exploring | MissionState::Paused
                 if all_down
+                    && !self.drones.iter().any(|d| d.awaits_battery)
                     && self
                         .drones
                         .iter()
@@ -960,7 +973,7 @@ impl Mission {
                 id: k,
                 name: d.name.clone(),
                 phase: d.phase,
-                left_mission: d.left_mission.clone(),
+                left_mission: d.why_away(),
                 link: d.link.status(),
                 telemetry: d.link.telemetry(),
                 pose: d.pose(),
