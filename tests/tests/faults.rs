@@ -2,14 +2,16 @@
 //! loopback sockets: chunks dropped, duplicated, corrupted, reordered and delayed, the line
 //! stalled, the connection cut.
 
+mod common;
+
 use std::collections::HashSet;
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use common::copter;
 use link::mavlink::{MavlinkConfig, MavlinkLink, MavlinkVehicle};
 use link::shield::{EmulatorConfig, EmulatorServer, Sensors, ShieldConfig, ShieldLink};
 use link::{ChannelMap, Command, LinkState, Sticks, Transport, VehicleLink};
-use sitl::{SimConfig, Sitl, SitlConfig, World};
+use sitl::Sitl;
 use tests::eventually;
 use tests::faults::{Direction, FaultProxy, Faults};
 
@@ -151,19 +153,6 @@ fn a_stalled_line_trips_the_shield_failsafe_and_is_seen_lost_within_its_bounds_t
     // sees it in the telemetry.
     assert!(eventually(S, || link.telemetry().armed == Some(true)));
     assert!(emulator.with(|e| e.flags().landing));
-}
-
-/// One simulated ArduCopter on `address`, in real time, without cameras.
-fn copter(address: &str) -> Sitl {
-    Sitl::start(SitlConfig {
-        world: Arc::new(World::load("apartment").expect("built-in world")),
-        sim: SimConfig::default(),
-        vehicles: vec![format!("mavlink@{address}").parse().expect("endpoint")],
-        camera: None,
-        speed: 1.0,
-        signing_key: None,
-    })
-    .expect("the simulator starts")
 }
 
 /// The station's MAVLink link through the proxy, and the first vehicle it hears.

@@ -1,12 +1,13 @@
 //! The station's MAVLink link against the simulated ArduCopter on a loopback socket: the flight
 //! mode it reports.
 
-use std::sync::Arc;
+mod common;
+
 use std::time::Duration;
 
+use common::copter;
 use link::mavlink::{MavlinkConfig, MavlinkLink};
 use link::{Command, FlightMode, VehicleLink};
-use sitl::{SimConfig, Sitl, SitlConfig, World};
 use tests::eventually;
 
 const S: Duration = Duration::from_secs(1);
@@ -16,15 +17,7 @@ fn a_mode_change_the_vehicle_accepted_is_its_mode_at_once() {
     // Heartbeats (1 Hz) carry the mode. Before, the link kept the old one until the next: a
     // drone taken off again after a landing read LAND for up to a second in the air, and the
     // station took that for the vehicle landing on its own.
-    let sitl = Sitl::start(SitlConfig {
-        world: Arc::new(World::load("apartment").expect("built-in world")),
-        sim: SimConfig::default(),
-        vehicles: vec!["mavlink@tcpin:127.0.0.1:0".parse().expect("endpoint")],
-        camera: None,
-        speed: 1.0,
-        signing_key: None,
-    })
-    .expect("the simulator starts");
+    let sitl = copter("tcpin:127.0.0.1:0");
     let port = sitl.endpoint_addrs()[0].expect("a TCP port").port();
     let link = MavlinkLink::connect(
         &format!("tcpout:127.0.0.1:{port}").parse().expect("address"),
