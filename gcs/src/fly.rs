@@ -48,8 +48,9 @@ pub struct FlyArgs {
     #[arg(long)]
     pub json: bool,
     /// A drone that came home for a low battery waits there for a charged one (swapped while
-    /// its flight controller stays on) and takes off 5 s after it reads 90 % or more, to rejoin
-    /// the exploration. Default: it stays down.
+    /// its flight controller stays on) and takes off 5 s after it reads a charged one (90 % or
+    /// more; 4.1 V a cell where it reports only the voltage), to rejoin the exploration.
+    /// Default: it stays down.
     #[arg(long)]
     pub rejoin_after_battery_swap: bool,
     /// The mission log.

@@ -13,10 +13,9 @@ use nav::avoid::{KeepClear, brake_toward_walls, keep_clear};
 use nav::control::{PidGains, Pose3, PositionController, PositionGains};
 use nav::local::{Follow, FollowerConfig, PathFollower, Pose2, wrap_angle};
 use nav::sweep::{self, View};
-
-use super::battery;
 use slam::ekf::{Ekf, EkfConfig, Input, Update};
 
+use super::battery;
 use super::perception::SlamFix;
 
 /// Bearings a look around checks for the unknown (5° apart).
