@@ -374,8 +374,15 @@ impl Ekf {
     /// The estimate, if good enough to fly on: a SLAM fix was had and the horizontal
     /// uncertainty has not grown past [`EkfConfig::max_position_sigma`] since.
     pub fn valid_estimate(&self) -> Option<Estimate> {
+        self.estimate_within(self.config.max_position_sigma)
+    }
+
+    /// The estimate if a SLAM fix was had and the horizontal uncertainty is at most
+    /// `max_position_sigma` metres since: [`Ekf::valid_estimate`] with another bound, for a use
+    /// that tolerates more than flying does (choosing a frontier to fly to).
+    pub fn estimate_within(&self, max_position_sigma: f64) -> Option<Estimate> {
         let e = self.estimate();
-        (self.fixed && e.position_sigma <= self.config.max_position_sigma).then_some(e)
+        (self.fixed && e.position_sigma <= max_position_sigma).then_some(e)
     }
 
     /// The horizontal velocity in the map (m/s), if known well enough to fly on

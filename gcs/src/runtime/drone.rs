@@ -92,6 +92,13 @@ pub struct DroneSpec {
     pub start: Option<[f64; 3]>,
 }
 
+/// Two frontier goals this close are the same one for the stuck clock, metres.
+const SAME_GOAL_M: f64 = 1.0;
+
+/// A goal given again this soon after the planner last gave it is still the one the stuck clock
+/// runs for, seconds (two plans at 1 Hz).
+const GOAL_GAP_S: f64 = 2.5;
+
 /// Timing and behaviour settings of every drone.
 #[derive(Debug, Clone)]
 pub struct DroneConfig {
@@ -108,6 +115,14 @@ pub struct DroneConfig {
     /// the drone's centre, leads back out to it, and leads less far near walls
     /// ([`nav::avoid::keep_clear`]).
     pub keep_clear: KeepClear,
+    /// The mission planner plans from a drone's position while its uncertainty (1 σ) is at most
+    /// this, metres: more than flying tolerates ([`EkfConfig::max_position_sigma`]), since a
+    /// frontier and a path are chosen as well from a position known to a metre. A drone whose
+    /// SLAM fixes came late for a moment (a slow machine, a big map) keeps its goal, and only
+    /// hovers until they come (on building 31 in a debug build, the fixes lagged past the
+    /// 0.35 m bound at every other plan: each plan gave both drones their goals and the next
+    /// took them back, and the drones hovered for 20 minutes).
+    pub plan_position_sigma_m: f64,
     /// Seconds without 0.3 m of progress toward a goal before it is given up.
     pub stuck_s: f64,
     /// A whole look around on the spot takes this long, seconds.
@@ -192,6 +207,7 @@ impl Default for DroneConfig {
             ekf: EkfConfig::default(),
             hold_band_m: 0.1,
             keep_clear: KeepClear::default(),
+            plan_position_sigma_m: 1.0,
             stuck_s: 15.0,
             scan_s: 10.0,
             sweep: Some(View::default()),
@@ -308,7 +324,10 @@ pub struct Drone {
     /// The way its look around at `goal` must turn (+1 counter-clockwise, −1 clockwise), set by
     /// the mission; `None`: the short way to the unknown.
     look_turn: Option<f64>,
+    /// The stuck clock: since when, and from where, it has not moved 0.3 m.
     progress: (f64, [f64; 2]),
+    /// The frontier goal the stuck clock runs for, and when the planner last gave it.
+    clocked_goal: Option<([f64; 2], f64)>,
     scan: Option<Scan>,
     hold: [f64; 2],
     /// Pursuing a carrot along a path this tick (not holding still).
@@ -410,6 +429,7 @@ impl Drone {
             goal: None,
             look_turn: None,
             progress: (t, [x, y]),
+            clocked_goal: None,
             scan: None,
             hold: [x, y],
             tracking: false,
@@ -646,8 +666,26 @@ impl Drone {
         }
         if goal != self.goal {
             tracing::debug!(drone = self.id + 1, from = ?self.goal, to = ?goal, "new goal");
-            let e = self.ekf.estimate();
-            self.progress = (now, [e.position[0], e.position[1]]);
+        }
+        if let Some(g) = goal {
+            // The stuck clock starts again only for another frontier: not for the same goal
+            // moved a little (the frontier's edge as the map grows), nor given back after the
+            // planner had taken it for a plan or two. Else a planner that keeps doing either
+            // (seen: goals given and taken back at every other plan for 18 minutes of building
+            // 31) keeps the drone on a goal it cannot reach for ever.
+            let same = self.clocked_goal.is_some_and(|(c, at)| {
+                (c[0] - g[0]).hypot(c[1] - g[1]) <= SAME_GOAL_M && now - at <= GOAL_GAP_S
+            });
+            if !same {
+                let e = self.ekf.estimate();
+                self.progress = (now, [e.position[0], e.position[1]]);
+            }
+            let clocked = if same {
+                self.clocked_goal.map_or(g, |c| c.0)
+            } else {
+                g
+            };
+            self.clocked_goal = Some((clocked, now));
         }
         self.goal = goal;
         self.look_turn = look_turn;
@@ -684,6 +722,15 @@ impl Drone {
         self.ekf
             .valid_estimate()
             .map(|e| [e.position[0], e.position[1], e.position[2], e.attitude[2]])
+    }
+
+    /// Where the mission planner plans this drone from (x, y): its position estimate while it
+    /// is known within `config.plan_position_sigma_m`, which a pose too uncertain to fly on
+    /// may still be.
+    pub fn plan_position(&self, config: &DroneConfig) -> Option<[f64; 2]> {
+        self.ekf
+            .estimate_within(config.plan_position_sigma_m)
+            .map(|e| [e.position[0], e.position[1]])
     }
 
     /// What the SLAM made of one of this drone's camera frames, reaching the mission at `now`:
@@ -1393,6 +1440,82 @@ mod tests {
         );
         drone.phase = Phase::Exploring;
         drone
+    }
+
+    #[test]
+    fn a_drone_whose_fixes_come_late_for_a_moment_is_still_planned_from() {
+        let config = DroneConfig::default();
+        let mut drone = exploring_drone(Arc::new(StubbornVehicle::default()), &config);
+        drone.slam_fix(0.0, [0.5, 0.0, 0.9], 0.0, None, true);
+        drone.set_plan(Some([5.0, 0.0]), vec![[0.5, 0.0], [5.0, 0.0]], None, 0.0);
+        // No fix for a moment: too uncertain to fly on, not to choose a frontier from.
+        let mut t = 0.0;
+        while drone.pose().is_some() {
+            t += 0.1;
+            drone.tick(t, &config);
+            assert!(t < 5.0, "a pose without fixes must expire");
+        }
+        let expired = t;
+        let e = drone.ekf.estimate();
+        assert_eq!(
+            drone.plan_position(&config),
+            Some([e.position[0], e.position[1]]),
+            "still planned from, where the filter has it"
+        );
+        assert_eq!(drone.goal, Some([5.0, 0.0]), "its goal is kept meanwhile");
+        // Without fixes for longer, it is not planned from either.
+        while drone.plan_position(&config).is_some() {
+            t += 0.1;
+            drone.tick(t, &config);
+            assert!(t < 20.0, "a planning position without fixes must expire");
+        }
+        assert!(
+            t > expired + 0.5,
+            "expired at {t} s, the pose at {expired} s"
+        );
+    }
+
+    #[test]
+    fn a_goal_the_planner_keeps_taking_back_and_moving_is_still_given_up_when_not_reached() {
+        let config = DroneConfig::default();
+        let mut drone = exploring_drone(Arc::new(StubbornVehicle::default()), &config);
+        // Held where it is (against a wall, say): the SLAM places it at the start every tick.
+        // The planner gives its goal at one plan, a few centimetres on, and takes it back at the
+        // next.
+        let mut t = 0.0;
+        let (mut first, mut given_up) = (None, None);
+        while t < config.stuck_s + 5.0 && given_up.is_none() {
+            t += 0.1;
+            drone.slam_fix(t, [0.0, 0.0, 0.9], 0.0, None, false);
+            let plan = (t * 10.0).round() as u32;
+            if plan.is_multiple_of(10) {
+                let goal = (plan / 10).is_multiple_of(2).then(|| {
+                    let g = [3.0, 0.05 * f64::from(plan % 3)];
+                    (g, vec![[0.0, 0.0], g])
+                });
+                let (goal, path) = goal.map_or((None, vec![]), |(g, p)| (Some(g), p));
+                first = first.or(goal.map(|_| t));
+                drone.set_plan(goal, path, None, t);
+            }
+            if let Some(DroneEvent::GiveUp(g)) = drone.tick(t, &config) {
+                given_up = Some((t, g));
+            }
+        }
+        let (at, goal) = given_up.expect("the goal is given up");
+        assert!((goal[0] - 3.0).abs() < 1e-9, "{goal:?}");
+        // At the first tick it holds the goal after the stuck time from the first plan with it.
+        let first = first.expect("a goal was given");
+        assert!(
+            at > first + config.stuck_s && at < first + config.stuck_s + 1.5,
+            "given up at {at} s, first given at {first} s"
+        );
+        // Another frontier restarts the clock.
+        drone.set_plan(Some([0.0, 3.0]), vec![[0.0, 0.0], [0.0, 3.0]], None, t);
+        for _ in 0..20 {
+            t += 0.1;
+            drone.slam_fix(t, [0.0, 0.0, 0.9], 0.0, None, false);
+            assert_eq!(drone.tick(t, &config), None, "at {t} s");
+        }
     }
 
     #[test]

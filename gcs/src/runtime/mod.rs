@@ -800,8 +800,8 @@ impl Mission {
         let robots: Vec<Option<[f64; 2]>> = exploring
             .iter()
             .map(|&k| {
-                let p = self.drones[k].pose()?;
-                grid.cell_of([p[0], p[1]]).map(|_| [p[0], p[1]])
+                let p = self.drones[k].plan_position(&self.config.drone)?;
+                grid.cell_of(p).map(|_| p)
             })
             .collect();
         let planners: Vec<PlannerConfig> = self
