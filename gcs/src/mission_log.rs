@@ -203,6 +203,89 @@ pub fn read(bytes: &[u8], origin: &str) -> anyhow::Result<MissionLog> {
     })
 }
 
+/// One planner decision of a log with the map it was made on: for `gcs plan --log`, to make
+/// it again and see why a drone got the goal it got, or none.
+#[derive(Debug)]
+pub struct Decision {
+    /// The mission's setup (planner settings).
+    pub setup: Setup,
+    /// The decision: the first recorded at or after the time asked for.
+    pub plan: RecordedPlan,
+    /// The map recorded last at or before the decision.
+    pub grid: Grid,
+    /// When that map was recorded, mission clock, seconds.
+    pub grid_t: f64,
+}
+
+/// The planner decision recorded first at or after `t` (mission clock, seconds) in a mission
+/// log, with its map; `origin` names the log in errors.
+pub fn decision_at(bytes: &[u8], origin: &str, t: f64) -> anyhow::Result<Decision> {
+    if !bytes.starts_with(mcap::MAGIC) {
+        bail!("{origin} is not an MCAP file (expected a mission.mcap written by gcs explore)");
+    }
+    let (mut setup, mut grid, mut last_plan) = (None, None, None);
+    // The recorder writes a decision's map just after it, at its time.
+    let mut found = false;
+    for m in messages(bytes) {
+        let Ok(m) = m else {
+            break; // a log cut short: what it has
+        };
+        match m.topic.as_str() {
+            "/setup" => {
+                setup = serde_json::from_slice::<Setup>(&m.data).ok();
+            }
+            "/map" => {
+                let at = m.log_time as f64 * 1e-9;
+                let same = last_plan
+                    .as_ref()
+                    .is_some_and(|p: &RecordedPlan| (p.t - at).abs() < 1e-3);
+                if found && !same {
+                    break;
+                }
+                if let Some(g) = FoxGrid::decode(&m.data[..]).ok().as_ref().and_then(grid_of) {
+                    grid = Some((g, at));
+                }
+                if found {
+                    break;
+                }
+            }
+            "/plan" if found => break,
+            "/plan" => {
+                let Ok(p) = serde_json::from_slice::<RecordedPlan>(&m.data) else {
+                    continue;
+                };
+                found = p.t >= t;
+                last_plan = Some(p);
+            }
+            _ => {}
+        }
+    }
+    let Some(setup) = setup else {
+        bail!("{origin} has no /setup message: not a log of gcs explore");
+    };
+    let Some(plan) = last_plan else {
+        bail!("{origin} records no planner decision (/plan): a log of gcs fly, or older than them");
+    };
+    if plan.t < t {
+        bail!(
+            "{origin}: no planner decision at or after {t} s; the last is at {:.1} s",
+            plan.t
+        );
+    }
+    let Some((grid, grid_t)) = grid else {
+        bail!(
+            "{origin} records no map before its decision at {:.1} s",
+            plan.t
+        );
+    };
+    Ok(Decision {
+        setup,
+        plan,
+        grid,
+        grid_t,
+    })
+}
+
 /// A recorded pose as an isometry (`None` when incomplete or not a rotation).
 fn isometry_of(p: &PoseInFrame) -> Option<Isometry3<f64>> {
     let pose = p.pose.as_ref()?;

@@ -1,10 +1,13 @@
-//! `gcs plan`: one mission-planner step on a map file, for given robot positions.
+//! `gcs plan`: one mission-planner step on a map file, for given robot positions; or one
+//! decision of a recorded mission made again, to see why each drone got the goal it got.
 
 use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
+use gcs::mission_log;
+use nav::mission::plan_first_open;
 use nav::{Grid, PlannerConfig, Strategy, explored_part, plan};
 use serde_json::json;
 
@@ -21,11 +24,19 @@ pub enum StrategyArg {
 #[derive(Args, Debug)]
 pub struct PlanArgs {
     /// The map: a ROS map_server YAML (with its PGM or PNG beside it).
-    #[arg(long)]
-    map: PathBuf,
+    #[arg(long, required_unless_present = "log", conflicts_with = "log")]
+    map: Option<PathBuf>,
+    /// Or a mission log (`mission.mcap` of `gcs explore`): make its planner decision at `--at`
+    /// again, on the map it was made on, from where its drones were, skipping the goals given
+    /// up by then, with the mission's planner settings (the other planner options do not apply).
+    #[arg(long, value_name = "MISSION.mcap", requires = "at")]
+    log: Option<PathBuf>,
+    /// With `--log`: the first decision at or after this mission time, seconds.
+    #[arg(long, value_name = "SECONDS", requires = "log")]
+    at: Option<f64>,
     /// A robot's position X,Y in metres (map frame); repeat for each robot; `none` for a robot
-    /// whose pose is invalid.
-    #[arg(long = "robot", value_name = "X,Y", required = true)]
+    /// whose pose is invalid. With `--log`, instead of the drones' recorded positions.
+    #[arg(long = "robot", value_name = "X,Y", required_unless_present = "log")]
     robots: Vec<String>,
     /// Obstacles are grown by this radius, metres.
     #[arg(long, default_value_t = 0.3)]
@@ -52,6 +63,11 @@ pub struct PlanArgs {
     png: Option<PathBuf>,
 }
 
+/// A point for the text report, or what its absence means.
+fn place(p: Option<[f64; 2]>, none: &str) -> String {
+    p.map_or(none.into(), |p| format!("({:.2}, {:.2}) m", p[0], p[1]))
+}
+
 fn parse_robot(s: &str) -> anyhow::Result<Option<[f64; 2]>> {
     if s.eq_ignore_ascii_case("none") {
         return Ok(None);
@@ -69,10 +85,17 @@ fn parse_robot(s: &str) -> anyhow::Result<Option<[f64; 2]>> {
     }
 }
 
+/// A recorded decision made again: what the mission did, to print beside the replanned one.
+struct Recorded {
+    decision: mission_log::Decision,
+    /// The drones' recorded positions were replaced by `--robot`.
+    moved: bool,
+}
+
 /// Runs the command.
 pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
     let mut stdout = std::io::stdout().lock();
-    let robots: Vec<Option<[f64; 2]>> = args
+    let mut robots: Vec<Option<[f64; 2]>> = args
         .robots
         .iter()
         .map(|s| parse_robot(s))
@@ -83,28 +106,73 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
     if !(args.region_radius.is_finite() && args.region_radius >= 0.0) {
         bail!("--region-radius must be zero (off) or more metres");
     }
-    let mut map = Grid::load(&args.map)?;
-    if let Some(r) = args.explored_radius {
-        if !(r.is_finite() && r > 0.0) {
-            bail!("--explored-radius must be more than zero metres");
+    let (map, p, elapsed, recorded) = match (&args.map, &args.log, args.at) {
+        (Some(_), _, Some(_)) => {
+            bail!("--at picks a decision of a mission log: give it with --log, not with --map")
         }
-        let seeds: Vec<[f64; 2]> = robots.iter().flatten().copied().collect();
-        map = explored_part(&map, &seeds, r);
-    }
-    let config = PlannerConfig {
-        robot_radius_m: args.robot_radius,
-        min_frontier_cells: args.min_frontier.max(1),
-        region_radius_m: args.region_radius,
-        strategy: match args.strategy {
-            StrategyArg::Hungarian => Strategy::Hungarian,
-            StrategyArg::Greedy => Strategy::Greedy,
-        },
-        ..PlannerConfig::default()
+        (Some(path), _, None) => {
+            let mut map = Grid::load(path)?;
+            if let Some(r) = args.explored_radius {
+                if !(r.is_finite() && r > 0.0) {
+                    bail!("--explored-radius must be more than zero metres");
+                }
+                let seeds: Vec<[f64; 2]> = robots.iter().flatten().copied().collect();
+                map = explored_part(&map, &seeds, r);
+            }
+            let config = PlannerConfig {
+                robot_radius_m: args.robot_radius,
+                min_frontier_cells: args.min_frontier.max(1),
+                region_radius_m: args.region_radius,
+                strategy: match args.strategy {
+                    StrategyArg::Hungarian => Strategy::Hungarian,
+                    StrategyArg::Greedy => Strategy::Greedy,
+                },
+                ..PlannerConfig::default()
+            };
+            let t = std::time::Instant::now();
+            let p = plan(&map, &robots, &config)?;
+            (map, p, t.elapsed().as_secs_f64(), None)
+        }
+        (None, Some(log), Some(at)) => {
+            if !at.is_finite() {
+                bail!("--at must be a mission time in seconds");
+            }
+            let bytes =
+                std::fs::read(log).with_context(|| format!("cannot read {}", log.display()))?;
+            let decision = mission_log::decision_at(&bytes, &log.display().to_string(), at)?;
+            let moved = !robots.is_empty();
+            let drones = decision.plan.goals.len();
+            if moved && robots.len() != drones {
+                bail!(
+                    "the decision at {:.1} s planned for {drones} exploring drones: give --robot {drones} times, or not at all",
+                    decision.plan.t
+                );
+            }
+            if !moved {
+                robots = decision.plan.goals.iter().map(|g| g.position).collect();
+            }
+            let configs: Vec<PlannerConfig> = crate::replay::planner_configs(&decision.setup)
+                .into_iter()
+                .map(|c| PlannerConfig {
+                    blacklist: decision.plan.given_up.clone(),
+                    ..c
+                })
+                .collect();
+            let t = std::time::Instant::now();
+            let Some(p) = plan_first_open(&decision.grid, &robots, &configs)? else {
+                bail!("{} names no planner radius to plan with", log.display());
+            };
+            let elapsed = t.elapsed().as_secs_f64();
+            let map = decision.grid.clone();
+            (map, p, elapsed, Some(Recorded { decision, moved }))
+        }
+        _ => bail!("give --map with --robot, or --log with --at"),
     };
-    let t = std::time::Instant::now();
-    let p = plan(&map, &robots, &config)?;
-    let elapsed = t.elapsed().as_secs_f64();
-    let total: f64 = p.robots.iter().filter_map(|r| r.cost_m).sum();
+    let total = p
+        .robots
+        .iter()
+        .filter_map(|r| r.cost_m)
+        .fold(0.0, |a, c| a + c);
     if args.json {
         let frontiers: Vec<_> = p
             .frontiers
@@ -134,7 +202,7 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
                 })
             })
             .collect();
-        let out = json!({
+        let mut out = json!({
             "frontiers": frontiers,
             "robots": robots_json,
             "cost_matrix": p.costs,
@@ -142,8 +210,46 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
             "complete": p.complete,
             "planning_time_s": elapsed,
         });
+        if let Some(r) = &recorded {
+            let d = &r.decision;
+            out["decision"] = json!({
+                "t": d.plan.t,
+                "map_t": d.grid_t,
+                "given_up": d.plan.given_up.len(),
+                "positions": if r.moved { "--robot" } else { "log" },
+                "drones": d.plan.goals.iter().map(|g| json!({
+                    "id": g.drone + 1,
+                    "position": g.position.map(|p| json!({"x": p[0], "y": p[1]})),
+                    "goal": g.goal.map(|p| json!({"x": p[0], "y": p[1]})),
+                })).collect::<Vec<_>>(),
+            });
+        }
         writeln!(stdout, "{out}")?;
     } else {
+        if let Some(r) = &recorded {
+            let d = &r.decision;
+            writeln!(
+                stdout,
+                "the decision at {:.1} s, on the map of {:.1} s, {} goals given up by then{}",
+                d.plan.t,
+                d.grid_t,
+                d.plan.given_up.len(),
+                if r.moved {
+                    ", from the positions given"
+                } else {
+                    ""
+                }
+            )?;
+            for (i, g) in d.plan.goals.iter().enumerate() {
+                writeln!(
+                    stdout,
+                    "  robot {i} is drone {}: at {}, the mission gave it {}",
+                    g.drone + 1,
+                    place(g.position, "no position (pose invalid)"),
+                    place(g.goal, "no goal")
+                )?;
+            }
+        }
         writeln!(
             stdout,
             "{} frontiers ({} × {} cells of {} m), planned in {:.1} ms",

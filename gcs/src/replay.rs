@@ -325,7 +325,7 @@ pub fn run(args: &ReplayArgs) -> anyhow::Result<()> {
 
 /// The mission planner's settings, as the log's setup recorded them (the runtime's defaults for
 /// what older logs did not record).
-fn planner_configs(setup: &Setup) -> Vec<PlannerConfig> {
+pub(crate) fn planner_configs(setup: &Setup) -> Vec<PlannerConfig> {
     let radii = if setup.planner_radii.is_empty() {
         RuntimeConfig::default().planner_radii
     } else {

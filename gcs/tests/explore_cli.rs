@@ -155,7 +155,61 @@ fn two_drones_explore_the_default_world_land_and_write_their_outputs() {
     let tlog = std::fs::read(out.join("drone1.tlog")).expect("drone1.tlog");
     assert!(tlog.len() > 1000 && tlog[8] == 0xFD, "{} bytes", tlog.len());
     replay_reproduces_the_map(&out);
+    plan_makes_a_recorded_decision_again(&out);
     std::fs::remove_dir_all(&out).ok();
+}
+
+/// `gcs plan --log` makes a decision of the mission again, on the map it was made on and from
+/// where the drones were, and gives the goals the mission gave; `--robot` moves the drones.
+fn plan_makes_a_recorded_decision_again(out: &Path) {
+    let log = out.join("mission.mcap");
+    let plan = |extra: &[&str]| -> serde_json::Value {
+        let run = gcs(&[
+            &[
+                "plan",
+                "--log",
+                log.to_str().expect("utf-8 path"),
+                "--at",
+                "20",
+                "--json",
+            ],
+            extra,
+        ]
+        .concat());
+        assert!(
+            run.status.success(),
+            "{}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        serde_json::from_slice(&run.stdout).expect("JSON")
+    };
+    let p = plan(&[]);
+    let decision = &p["decision"];
+    assert!(number(&decision["t"]) >= 20.0, "{decision}");
+    assert_eq!(decision["map_t"], decision["t"], "the map it was made on");
+    assert_eq!(decision["positions"], "log");
+    let drones = decision["drones"].as_array().expect("drones");
+    let robots = p["robots"].as_array().expect("robots");
+    assert_eq!(drones.len(), robots.len());
+    assert!(
+        drones.iter().any(|d| d["goal"].is_object()),
+        "a drone had a goal at 20 s: {decision}"
+    );
+    for (d, r) in drones.iter().zip(robots) {
+        assert_eq!(d["position"], r["position"], "{p}");
+        assert_eq!(d["goal"], r["target"], "{p}");
+    }
+    // The positions given instead: drone 1 where it was, drone 2 without a pose.
+    assert_eq!(drones.len(), 2, "both drones explored at 20 s: {decision}");
+    let at = &drones[0]["position"];
+    let at = format!("{},{}", number(&at["x"]), number(&at["y"]));
+    let moved = plan(&["--robot", &at, "--robot", "none"]);
+    assert_eq!(moved["decision"]["positions"], "--robot");
+    assert_eq!(
+        moved["robots"][1]["hover_reason"], "pose invalid",
+        "{moved}"
+    );
+    assert!(moved["robots"][0]["target"].is_object(), "{moved}");
 }
 
 /// `gcs replay` on the mission's log maps the recorded frames on the recorded true poses again

@@ -200,4 +200,28 @@ fn bad_input_gets_clear_errors() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("--region-radius must be"));
     let out = gcs(&["plan", "--map", &map("willow-full.yaml")]);
     assert_eq!(out.status.code(), Some(2), "--robot is required");
+    // The missing-file message says why once, after the file's name.
+    let out = gcs(&["plan", "--map", "/nonexistent/map.yaml", "--robot", "0,0"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(stderr.matches("No such file").count(), 1, "{stderr}");
+    // A decision of a mission log: --at with --log only, and the log must be one.
+    let out = gcs(&["plan", "--log", "/nonexistent/mission.mcap"]);
+    assert_eq!(out.status.code(), Some(2), "--at is required with --log");
+    let out = gcs(&[
+        "plan",
+        "--map",
+        &map("willow-full.yaml"),
+        "--robot",
+        "12,30",
+        "--at",
+        "5",
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("with --log"));
+    let out = gcs(&["plan", "--log", &map("willow-full.yaml"), "--at", "5"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("is not an MCAP file"));
+    let out = gcs(&["plan", "--log", "/nonexistent/mission.mcap", "--at", "5"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("cannot read /nonexistent/mission.mcap"));
 }

@@ -39,12 +39,12 @@ pub struct Grid {
 #[derive(Debug, thiserror::Error)]
 pub enum MapError {
     /// The file could not be read or written.
-    #[error("{path}: {source}")]
+    #[error("{path}: {why}")]
     Io {
         /// The file.
         path: PathBuf,
-        /// Why.
-        source: std::io::Error,
+        /// Why (in the message, not as a source: the message would say it twice).
+        why: std::io::Error,
     },
     /// The YAML is not a map_server map description.
     #[error("{path}: not a map_server map description: {reason}")]
@@ -165,14 +165,14 @@ impl Grid {
     /// `occupied_thresh`, free below `free_thresh`, unknown between).
     pub fn load(yaml_path: impl AsRef<Path>) -> Result<Self, MapError> {
         let yaml_path = yaml_path.as_ref();
-        let text = std::fs::read_to_string(yaml_path).map_err(|source| MapError::Io {
+        let text = std::fs::read_to_string(yaml_path).map_err(|why| MapError::Io {
             path: yaml_path.into(),
-            source,
+            why,
         })?;
         Self::from_map_server(yaml_path, &text, |image_path| {
-            std::fs::read(image_path).map_err(|source| MapError::Io {
+            std::fs::read(image_path).map_err(|why| MapError::Io {
                 path: image_path.into(),
-                source,
+                why,
             })
         })
     }
@@ -282,9 +282,9 @@ impl Grid {
             img.put_pixel(x as u32, (self.height - 1 - y) as u32, Luma([v]));
         }
         // Binary PGM (P5), as map_server reads it; the image crate's default PNM is PAM (P7).
-        let file = std::fs::File::create(&pgm_path).map_err(|source| MapError::Io {
+        let file = std::fs::File::create(&pgm_path).map_err(|why| MapError::Io {
             path: pgm_path.clone(),
-            source,
+            why,
         })?;
         let encoder = PnmEncoder::new(std::io::BufWriter::new(file))
             .with_subtype(PnmSubtype::Graymap(SampleEncoding::Binary));
@@ -301,9 +301,9 @@ impl Grid {
             "image: {name}\nresolution: {}\norigin: [{}, {}, 0.0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n",
             self.resolution, self.origin[0], self.origin[1]
         );
-        std::fs::write(yaml_path, yaml).map_err(|source| MapError::Io {
+        std::fs::write(yaml_path, yaml).map_err(|why| MapError::Io {
             path: yaml_path.into(),
-            source,
+            why,
         })
     }
 
