@@ -170,58 +170,56 @@ fn a_reader_that_stops_reading_ends_it_quietly() {
     assert!(!stderr.contains("panicked"), "{stderr}");
 }
 
+/// Runs `gcs plan` with `args`, expecting it refused with exit code `code` and a message
+/// containing `says`; returns the message.
+fn refused(args: &[&str], code: i32, says: &str) -> String {
+    let out = gcs(&[&["plan"][..], args].concat());
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(code), "{args:?}: {stderr}");
+    assert!(stderr.contains(says), "{args:?}: {stderr}");
+    stderr
+}
+
 #[test]
 fn bad_input_gets_clear_errors() {
-    let out = gcs(&["plan", "--map", "/nonexistent/map.yaml", "--robot", "0,0"]);
-    assert_eq!(out.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent/map.yaml"));
-    let out = gcs(&[
-        "plan",
-        "--map",
-        &map("willow-full.yaml"),
-        "--robot",
-        "500,0",
-    ]);
-    assert_eq!(out.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("outside the map"));
-    let out = gcs(&["plan", "--map", &map("willow-full.yaml"), "--robot", "1;2"]);
-    assert_eq!(out.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("expected X,Y"));
-    let out = gcs(&[
-        "plan",
-        "--map",
-        &map("willow-full.yaml"),
-        "--robot",
-        "12,30",
-        "--region-radius",
-        "NaN",
-    ]);
-    assert_eq!(out.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("--region-radius must be"));
-    let out = gcs(&["plan", "--map", &map("willow-full.yaml")]);
-    assert_eq!(out.status.code(), Some(2), "--robot is required");
-    // The missing-file message says why once, after the file's name.
-    let out = gcs(&["plan", "--map", "/nonexistent/map.yaml", "--robot", "0,0"]);
-    let stderr = String::from_utf8_lossy(&out.stderr);
+    let willow = map("willow-full.yaml");
+    // A missing map file: named, and why said once.
+    let stderr = refused(
+        &["--map", "/nonexistent/map.yaml", "--robot", "0,0"],
+        1,
+        "/nonexistent/map.yaml",
+    );
     assert_eq!(stderr.matches("No such file").count(), 1, "{stderr}");
+    refused(
+        &["--map", &willow, "--robot", "500,0"],
+        1,
+        "outside the map",
+    );
+    refused(&["--map", &willow, "--robot", "1;2"], 1, "expected X,Y");
+    refused(
+        &[
+            "--map",
+            &willow,
+            "--robot",
+            "12,30",
+            "--region-radius",
+            "NaN",
+        ],
+        1,
+        "--region-radius must be",
+    );
+    refused(&["--map", &willow], 2, "--robot");
     // A decision of a mission log: --at with --log only, and the log must be one.
-    let out = gcs(&["plan", "--log", "/nonexistent/mission.mcap"]);
-    assert_eq!(out.status.code(), Some(2), "--at is required with --log");
-    let out = gcs(&[
-        "plan",
-        "--map",
-        &map("willow-full.yaml"),
-        "--robot",
-        "12,30",
-        "--at",
-        "5",
-    ]);
-    assert_eq!(out.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("with --log"));
-    let out = gcs(&["plan", "--log", &map("willow-full.yaml"), "--at", "5"]);
-    assert_eq!(out.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("is not an MCAP file"));
-    let out = gcs(&["plan", "--log", "/nonexistent/mission.mcap", "--at", "5"]);
-    assert_eq!(out.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("cannot read /nonexistent/mission.mcap"));
+    refused(&["--log", "/nonexistent/mission.mcap"], 2, "--at");
+    refused(
+        &["--map", &willow, "--robot", "12,30", "--at", "5"],
+        1,
+        "with --log",
+    );
+    refused(&["--log", &willow, "--at", "5"], 1, "is not an MCAP file");
+    refused(
+        &["--log", "/nonexistent/mission.mcap", "--at", "5"],
+        1,
+        "cannot read /nonexistent/mission.mcap",
+    );
 }
