@@ -121,7 +121,7 @@ pub struct DroneConfig {
     /// SLAM fixes came late for a moment (a slow machine, a big map) keeps its goal, and only
     /// hovers until they come (on building 31 in a debug build, the fixes lagged past the
     /// 0.35 m bound at every other plan: each plan gave both drones their goals and the next
-    /// took them back, and the drones hovered for 20 minutes).
+    /// took them back, and the drones hovered for 18 minutes of mission time).
     pub plan_position_sigma_m: f64,
     /// Seconds without 0.3 m of progress toward a goal before it is given up.
     pub stuck_s: f64,
