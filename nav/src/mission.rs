@@ -67,6 +67,17 @@ pub struct PlannerConfig {
     /// average against 225 s, but four drones 170 s against 161 s — within the spread of
     /// single runs either way.
     pub region_radius_m: f64,
+    /// Per robot (in the order of the robots planned for), the frontier goal it flies to now, if
+    /// any, map frame: the frontier whose goal lies nearest it, within [`SAME_FRONTIER_M`], costs
+    /// that robot [`PlannerConfig::hold_margin_m`] less in the assignment. Without it two robots
+    /// whose costs to two goals nearly tie swap them at every step as they move (building 31:
+    /// the same two goals swapped at every plan for 80 s), and each swap restarts the flight.
+    /// Empty: no robot holds a goal.
+    pub held: Vec<Option<[f64; 2]>>,
+    /// What holding on to its goal is worth to a robot, metres of path: another frontier takes
+    /// it away only when cheaper by more than this (or when the assignment as a whole gains
+    /// more).
+    pub hold_margin_m: f64,
 }
 
 impl Default for PlannerConfig {
@@ -84,6 +95,8 @@ impl Default for PlannerConfig {
             view_range_m: 2.5,
             frontier_margin_m: 0.1,
             region_radius_m: 0.0,
+            held: vec![],
+            hold_margin_m: 1.0,
         }
     }
 }
@@ -207,9 +220,9 @@ pub fn plan_first_open(
     Ok(chosen)
 }
 
-/// Two frontier goals this close, from plans with different robot radii, are the same
-/// frontier's, metres.
-const SAME_FRONTIER_M: f64 = 1.0;
+/// Two frontier goals this close are the same frontier's, metres: from plans with different
+/// robot radii, or from one plan and the next (a frontier's goal moves as the map grows).
+pub const SAME_FRONTIER_M: f64 = 1.0;
 
 /// Robots with a pose that the plan `step` left without a frontier, although a thinner
 /// configuration (`thinner`) reaches one no other robot of `step` is headed for, are given it
@@ -390,17 +403,27 @@ pub fn plan(
         vec![None; robots.len()]
     } else {
         let region = regions(map, &frontiers, config.region_radius_m);
+        let centres: Vec<[f64; 2]> = goals.iter().map(|&g| inflated.center_of(g)).collect();
+        let held = held_frontiers(&raw, &centres, &config.held);
         match config.strategy {
             // The thesis pads the matrix to square with zero-cost dummies; the rectangular solver
             // reaches the same optimum without the O(n³) cost of the padding.
-            Strategy::Hungarian => spread(&costs, &region, hungarian),
+            Strategy::Hungarian => spread(
+                &holding(costs.clone(), &held, config.hold_margin_m),
+                &region,
+                hungarian,
+            ),
             Strategy::Greedy => {
                 // The baseline only considers pairs that can actually be flown.
                 let usable: Vec<Vec<f64>> = raw
                     .iter()
                     .map(|r| r.iter().map(|c| c.unwrap_or(f64::INFINITY)).collect())
                     .collect();
-                spread(&usable, &region, greedy)
+                spread(
+                    &holding(usable, &held, config.hold_margin_m),
+                    &region,
+                    greedy,
+                )
             }
         }
     };
@@ -457,6 +480,40 @@ pub fn plan(
         costs,
         robots: robots_out,
     })
+}
+
+/// Per robot, the frontier it holds ([`PlannerConfig::held`]): the one it can reach whose goal
+/// (`goals`, map frame) lies nearest its held goal, within [`SAME_FRONTIER_M`].
+fn held_frontiers(
+    raw: &[Vec<Option<f64>>],
+    goals: &[[f64; 2]],
+    held: &[Option<[f64; 2]>],
+) -> Vec<Option<usize>> {
+    raw.iter()
+        .enumerate()
+        .map(|(r, row)| {
+            let h = held.get(r).copied().flatten()?;
+            goals
+                .iter()
+                .enumerate()
+                .filter(|&(f, _)| row[f].is_some())
+                .map(|(f, g)| (f, (g[0] - h[0]).hypot(g[1] - h[1])))
+                .filter(|&(_, d)| d <= SAME_FRONTIER_M)
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .map(|(f, _)| f)
+        })
+        .collect()
+}
+
+/// `cost` (robots × frontiers) with each robot's held frontier `margin` cheaper (not below 0):
+/// what the assignment weighs.
+fn holding(mut cost: Vec<Vec<f64>>, held: &[Option<usize>], margin: f64) -> Vec<Vec<f64>> {
+    for (row, f) in cost.iter_mut().zip(held) {
+        if let Some(c) = f.and_then(|f| row.get_mut(f)) {
+            *c = (*c - margin).max(0.0);
+        }
+    }
+    cost
 }
 
 /// A collision-free route from `from` to `to` (map frame, metres) on `map` with obstacles grown
@@ -955,6 +1012,82 @@ mod tests {
         assert_eq!(
             p.robots.iter().filter(|r| r.hover_reason.is_some()).count(),
             1
+        );
+    }
+
+    #[test]
+    fn a_robot_keeps_its_frontier_unless_another_is_cheaper_by_more_than_the_margin() {
+        // A corridor open at both ends: two robots side by side in its middle nearly tie.
+        let corridor = grid_with(
+            &[
+                "##############################",
+                "?............................?",
+                "?............................?",
+                "?............................?",
+                "?............................?",
+                "##############################",
+            ],
+            0.25,
+        );
+        let left = |p: &Plan| -> Vec<bool> {
+            p.robots
+                .iter()
+                .map(|r| r.goal.expect("a goal for each robot")[0] < 3.75)
+                .collect()
+        };
+        let side_by_side = [Some([3.65, 0.75]), Some([3.85, 0.75])];
+        let free = plan(&corridor, &side_by_side, &toy_config()).unwrap();
+        assert_eq!(
+            left(&free),
+            [true, false],
+            "the one a little left goes left"
+        );
+        // Each holding the other's end (as the map grew, half a metre off its goal now): to
+        // swap would save 0.4 m, less than the margins, so they keep them.
+        let goal = |r: usize| free.robots[r].goal.unwrap();
+        let off = |g: [f64; 2]| Some([g[0], g[1] + 0.5]);
+        let holding = PlannerConfig {
+            held: vec![off(goal(1)), off(goal(0))],
+            ..toy_config()
+        };
+        let kept = plan(&corridor, &side_by_side, &holding).unwrap();
+        assert_eq!(left(&kept), [false, true]);
+        // The held goals are only what the margin makes of them.
+        let no_margin = PlannerConfig {
+            hold_margin_m: 0.0,
+            ..holding.clone()
+        };
+        assert_eq!(
+            left(&plan(&corridor, &side_by_side, &no_margin).unwrap()),
+            [true, false]
+        );
+        // Nor does a goal held too far from any frontier's hold one.
+        let far = PlannerConfig {
+            held: vec![
+                Some([goal(1)[0] - 1.5, 0.75]),
+                Some([goal(0)[0] + 1.5, 0.75]),
+            ],
+            ..toy_config()
+        };
+        assert_eq!(
+            left(&plan(&corridor, &side_by_side, &far).unwrap()),
+            [true, false]
+        );
+        // Two metres apart, to swap saves 4 m, more than both margins: they swap. The costs
+        // reported are the paths', not what the margin made of them.
+        let apart = [Some([2.75, 0.75]), Some([4.75, 0.75])];
+        let swapped = plan(&corridor, &apart, &holding).unwrap();
+        assert_eq!(left(&swapped), [true, false]);
+        let unheld = plan(&corridor, &apart, &toy_config()).unwrap();
+        assert_eq!(swapped.costs, unheld.costs);
+        // The greedy baseline holds its goals too.
+        let greedy = PlannerConfig {
+            strategy: Strategy::Greedy,
+            ..holding.clone()
+        };
+        assert_eq!(
+            left(&plan(&corridor, &side_by_side, &greedy).unwrap()),
+            [false, true]
         );
     }
 
