@@ -68,6 +68,11 @@ pub struct SimArgs {
     /// region of its own).
     #[arg(long, value_name = "METRES", default_value_t = PlannerConfig::default().region_radius_m)]
     pub region_radius: f64,
+    /// A drone keeps the frontier it flies to unless another is cheaper by more than this,
+    /// metres of path; 0: every plan assigns afresh (two drones whose costs nearly tie may then
+    /// swap their goals at every plan).
+    #[arg(long, value_name = "METRES", default_value_t = PlannerConfig::default().hold_margin_m)]
+    pub hold_margin: f64,
     /// How a drone looks around at a goal: turning the short way to what the map shows
     /// unknown, no further (`sweep`), or a whole turn every time (`whole`, as the thesis).
     #[arg(long, value_enum, default_value_t = LookAround::Sweep)]
@@ -417,6 +422,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
             strategy: args.sim.strategy.name().into(),
             planner_radii: RuntimeConfig::default().planner_radii,
             region_radius_m: Some(args.sim.region_radius),
+            hold_margin_m: Some(args.sim.hold_margin),
             drones: fleet
                 .drones
                 .iter()
@@ -443,6 +449,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
         RuntimeConfig {
             strategy: args.sim.strategy.strategy(),
             region_radius_m: args.sim.region_radius,
+            hold_margin_m: args.sim.hold_margin,
             timeout: Some(args.timeout),
             drone: DroneConfig {
                 sweep: match args.sim.look_around {

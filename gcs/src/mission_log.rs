@@ -12,6 +12,7 @@ use foxglove::messages::{CameraCalibration, CompressedImage, Grid as FoxGrid, Po
 use link::camera::{Intrinsics, RgbdFrame};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 use nav::grid::{Cell, Grid};
+use nav::mission::PlannerConfig;
 
 use crate::record::{DroneState, PlannedGoal, Setup};
 use crate::runtime::perception::CameraFrame;
@@ -45,6 +46,21 @@ pub struct RecordedPlan {
     pub goals: Vec<PlannedGoal>,
     /// The goals given up by then.
     pub given_up: Vec<[f64; 2]>,
+}
+
+impl RecordedPlan {
+    /// The mission's planner settings (`mission`, widest radius first) as they stood at this
+    /// decision: with the goals given up by then and the goals the drones held.
+    pub fn planner_configs(&self, mission: &[PlannerConfig]) -> Vec<PlannerConfig> {
+        mission
+            .iter()
+            .map(|c| PlannerConfig {
+                blacklist: self.given_up.clone(),
+                held: self.goals.iter().map(|g| g.held).collect(),
+                ..c.clone()
+            })
+            .collect()
+    }
 }
 
 /// Reads what replay needs from a mission log; stops at the first unreadable message (a log cut
@@ -532,6 +548,30 @@ mod tests {
         assert_eq!(drone_of("/drone12/state"), Some(11));
         assert_eq!(drone_of("/drone0/state"), None);
         assert_eq!(drone_of("/map"), None);
+    }
+
+    #[test]
+    fn a_recorded_decision_plans_with_what_it_had_given_up_and_the_goals_the_drones_held() {
+        // As written on `/plan`: drone 2 held no goal, and a log from before held goals has none.
+        let plan: RecordedPlan = serde_json::from_str(
+            r#"{"t": 12.0, "given_up": [[1.0, 2.0]], "goals": [
+                {"drone": 1, "position": [0.5, 0.5], "held": [3.0, 4.0], "goal": [3.1, 4.0]},
+                {"drone": 2, "position": null, "goal": null}]}"#,
+        )
+        .expect("a recorded plan");
+        let mission = [0.45, 0.25].map(|robot_radius_m| PlannerConfig {
+            robot_radius_m,
+            hold_margin_m: 0.7,
+            ..PlannerConfig::default()
+        });
+        let configs = plan.planner_configs(&mission);
+        assert_eq!(configs.len(), 2);
+        for (c, m) in configs.iter().zip(&mission) {
+            assert_eq!(c.robot_radius_m, m.robot_radius_m);
+            assert_eq!(c.hold_margin_m, 0.7);
+            assert_eq!(c.blacklist, vec![[1.0, 2.0]]);
+            assert_eq!(c.held, vec![Some([3.0, 4.0]), None]);
+        }
     }
 
     #[test]

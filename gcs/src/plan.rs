@@ -151,13 +151,9 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
             if !moved {
                 robots = decision.plan.goals.iter().map(|g| g.position).collect();
             }
-            let configs: Vec<PlannerConfig> = crate::replay::planner_configs(&decision.setup)
-                .into_iter()
-                .map(|c| PlannerConfig {
-                    blacklist: decision.plan.given_up.clone(),
-                    ..c
-                })
-                .collect();
+            let configs = decision
+                .plan
+                .planner_configs(&crate::replay::planner_configs(&decision.setup));
             let t = std::time::Instant::now();
             let Some(p) = plan_first_open(&decision.grid, &robots, &configs)? else {
                 bail!("{} names no planner radius to plan with", log.display());
@@ -220,6 +216,7 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
                 "drones": d.plan.goals.iter().map(|g| json!({
                     "id": g.drone + 1,
                     "position": g.position.map(|p| json!({"x": p[0], "y": p[1]})),
+                    "held": g.held.map(|p| json!({"x": p[0], "y": p[1]})),
                     "goal": g.goal.map(|p| json!({"x": p[0], "y": p[1]})),
                 })).collect::<Vec<_>>(),
             });
@@ -243,9 +240,10 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
             for (i, g) in d.plan.goals.iter().enumerate() {
                 writeln!(
                     stdout,
-                    "  robot {i} is drone {}: at {}, the mission gave it {}",
+                    "  robot {i} is drone {}: at {}, flying to {}, the mission gave it {}",
                     g.drone + 1,
                     place(g.position, "no position (pose invalid)"),
+                    place(g.held, "no goal"),
                     place(g.goal, "no goal")
                 )?;
             }

@@ -45,6 +45,10 @@ pub struct Setup {
     /// The planner's region radius, metres (absent from logs recorded before regions: 0, off).
     #[serde(default)]
     pub region_radius_m: Option<f64>,
+    /// What a drone's held goal was worth in the assignment, metres (absent from older logs,
+    /// whose plans held no goal).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hold_margin_m: Option<f64>,
     /// The drones.
     pub drones: Vec<SetupDrone>,
 }
@@ -127,6 +131,10 @@ pub struct PlannedGoal {
     /// Where the planner had it (x, y), `None` without a valid pose.
     #[serde(default)]
     pub position: Option<[f64; 2]>,
+    /// The goal it flew to when the planner was called, which it kept unless another was
+    /// cheaper by the hold margin ([`Setup::hold_margin_m`]; absent from older logs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held: Option<[f64; 2]>,
     /// The frontier goal it was given, if any.
     pub goal: Option<[f64; 2]>,
 }

@@ -100,13 +100,7 @@ impl NavigationTally {
         self.decisions += 1;
         self.goals += recorded.goals.len();
         let robots: Vec<Option<[f64; 2]>> = recorded.goals.iter().map(|g| g.position).collect();
-        let configs: Vec<PlannerConfig> = configs
-            .iter()
-            .map(|c| PlannerConfig {
-                blacklist: recorded.given_up.clone(),
-                ..c.clone()
-            })
-            .collect();
+        let configs = recorded.planner_configs(configs);
         // No map yet, or a drone off the replayed map: every goal differs.
         let Some(Ok(Some(plan))) =
             grid.map(|g| nav::mission::plan_first_open(g, &robots, &configs))
@@ -341,6 +335,9 @@ pub(crate) fn planner_configs(setup: &Setup) -> Vec<PlannerConfig> {
             strategy,
             robot_radius_m,
             region_radius_m: setup.region_radius_m.unwrap_or(0.0),
+            hold_margin_m: setup
+                .hold_margin_m
+                .unwrap_or(PlannerConfig::default().hold_margin_m),
             ..PlannerConfig::default()
         })
         .collect()
@@ -456,6 +453,7 @@ mod tests {
             strategy: "hungarian".into(),
             planner_radii: vec![],
             region_radius_m: None,
+            hold_margin_m: None,
             drones: vec![],
         });
         assert_eq!(configs.len(), RuntimeConfig::default().planner_radii.len());
@@ -467,10 +465,12 @@ mod tests {
             strategy: "greedy".into(),
             planner_radii: vec![0.3],
             region_radius_m: Some(2.5),
+            hold_margin_m: Some(0.5),
             drones: vec![],
         });
         assert_eq!(with_regions.len(), 1);
         assert_eq!(with_regions[0].region_radius_m, 2.5);
+        assert_eq!(with_regions[0].hold_margin_m, 0.5);
         assert_eq!(with_regions[0].strategy, Strategy::Greedy);
         let robots = [Some([0.5, 1.0])];
         let live = nav::mission::plan_first_open(&grid, &robots, &configs)
@@ -482,6 +482,7 @@ mod tests {
             goals: vec![gcs::record::PlannedGoal {
                 drone: 0,
                 position: robots[0],
+                held: None,
                 goal,
             }],
             given_up,

@@ -12,6 +12,7 @@ use nav::Grid;
 use nav::avoid::{KeepClear, brake_toward_walls, keep_clear};
 use nav::control::{PidGains, Pose3, PositionController, PositionGains};
 use nav::local::{Follow, FollowerConfig, PathFollower, Pose2, wrap_angle};
+use nav::mission::SAME_FRONTIER_M;
 use nav::sweep::{self, View};
 use slam::ekf::{Ekf, EkfConfig, Input, Update};
 
@@ -91,9 +92,6 @@ pub struct DroneSpec {
     /// Where it starts in the map (x, y, yaw), when known.
     pub start: Option<[f64; 3]>,
 }
-
-/// Two frontier goals this close are the same one for the stuck clock, metres.
-const SAME_GOAL_M: f64 = 1.0;
 
 /// A goal given again this soon after the planner last gave it is still the one the stuck clock
 /// runs for, seconds (two plans at 1 Hz).
@@ -674,7 +672,7 @@ impl Drone {
             // (seen: goals given and taken back at every other plan for 18 minutes of building
             // 31) keeps the drone on a goal it cannot reach for ever.
             let same = self.clocked_goal.is_some_and(|(c, at)| {
-                (c[0] - g[0]).hypot(c[1] - g[1]) <= SAME_GOAL_M && now - at <= GOAL_GAP_S
+                (c[0] - g[0]).hypot(c[1] - g[1]) <= SAME_FRONTIER_M && now - at <= GOAL_GAP_S
             });
             if !same {
                 let e = self.ekf.estimate();
@@ -774,10 +772,22 @@ impl Drone {
         inliers: Option<usize>,
         keyframe: bool,
     ) {
-        let used = matches!(
-            self.ekf.update_slam_on(stamp, position, yaw, inliers),
-            Update::Applied | Update::Corrected
-        );
+        let update = self.ekf.update_slam_on(stamp, position, yaw, inliers);
+        let used = matches!(update, Update::Applied | Update::Corrected);
+        if !used {
+            let e = self.ekf.estimate();
+            tracing::debug!(
+                drone = self.id + 1,
+                stamp,
+                filter_t = self.ekf.time(),
+                ?update,
+                fix = ?position,
+                estimate = ?e.position,
+                vz = e.velocity[2],
+                sigma = e.position_sigma,
+                "SLAM fix not taken by the filter"
+            );
+        }
         if used {
             self.lost_at = None;
             self.lost_since = None;

@@ -1,10 +1,11 @@
 //! The mission runtime: per drone, camera frames and telemetry → SLAM → mission planner (1 Hz)
 //! → path → path follower and position controllers (10 Hz) → RC overrides through the link.
 //!
-//! Threads: the SLAM ([`perception`]) works through camera frames; the mission loop (this
-//! module) runs the drones' filters, state machines and controllers on the mission clock, plans
-//! once a second, obeys the operator's commands and publishes a [`Snapshot`] every tick, which
-//! displays read without ever waiting on SLAM, planning or I/O.
+//! Threads: the SLAM ([`perception`]) works through camera frames; the planner (`planning`)
+//! projects the map and plans once a second; the mission loop (this module) runs the drones'
+//! filters, state machines and controllers on the mission clock without waiting for either,
+//! obeys the operator's commands and publishes a [`Snapshot`] every tick, which displays read
+//! without ever waiting on SLAM, planning or I/O.
 //!
 //! Safety: a drone whose link is lost drops out (its goal goes to the others; the vehicle's own
 //! failsafe lands it) and rejoins if the link comes back while it still flies; a drone without a
@@ -14,6 +15,7 @@
 pub mod battery;
 pub mod drone;
 pub mod perception;
+mod planning;
 pub mod trail;
 
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -32,6 +34,7 @@ use crate::clock::Clock;
 use crate::record::{PlannedGoal, Record, Recorder};
 use drone::{Drone, DroneConfig, DroneEvent, DroneSpec, Phase};
 use perception::{CameraFrame, Perception, PerceptionResult, SensorLog, SensorSample, SlamView};
+use planning::{Ask, Planner, PlannerStopped};
 use trail::Trail;
 
 /// Mission settings.
@@ -45,6 +48,9 @@ pub struct RuntimeConfig {
     /// Frontiers within this distance of each other, in sight, are one region, and drones are
     /// spread one to a region first ([`PlannerConfig::region_radius_m`]), metres; 0: off.
     pub region_radius_m: f64,
+    /// A drone keeps the frontier it flies to unless another is cheaper by more than this
+    /// ([`PlannerConfig::hold_margin_m`]), metres of path.
+    pub hold_margin_m: f64,
     /// Control period, seconds (mission clock).
     pub control_period: f64,
     /// Mission-planner period, seconds.
@@ -70,6 +76,7 @@ impl Default for RuntimeConfig {
             strategy: Strategy::Hungarian,
             planner_radii: vec![0.45, 0.35, 0.25],
             region_radius_m: PlannerConfig::default().region_radius_m,
+            hold_margin_m: PlannerConfig::default().hold_margin_m,
             control_period: 0.1,
             plan_period: 1.0,
             drone: DroneConfig::default(),
@@ -296,6 +303,7 @@ impl Runtime {
     ) -> std::io::Result<Self> {
         let sensors = Arc::new(SensorLog::new(drones.len()));
         let perception = Perception::start(slam, frames, sensors.clone(), recorder.clone())?;
+        let planner = Planner::start(perception.map())?;
         let t0 = clock.now();
         let drones: Vec<Drone> = drones
             .into_iter()
@@ -334,6 +342,8 @@ impl Runtime {
             trajectories: vec![],
             recorder,
             last_plan_record: f64::NEG_INFINITY,
+            planner,
+            planner_lost: false,
         };
         let thread = {
             let done = done.clone();
@@ -431,6 +441,10 @@ struct Mission {
     trajectories: Vec<Trail>,
     recorder: Option<Recorder>,
     last_plan_record: f64,
+    /// Maps and plans, on their own thread.
+    planner: Planner,
+    /// The planner's thread stopped (and every drone was told to land).
+    planner_lost: bool,
 }
 
 impl Mission {
@@ -467,13 +481,10 @@ impl Mission {
             }
             if now >= next_plan {
                 next_plan = (next_plan + self.config.plan_period).max(now - 1.0);
-                if matches!(self.state, MissionState::Exploring) {
-                    self.plan(now);
-                } else {
-                    self.refresh_map();
-                }
+                self.ask_plan(now);
                 self.plan_home();
             }
+            self.take_plan(now);
             self.check_end(now);
             if let MissionState::Done(_) = self.state
                 && (self.config.exit_when_done || shutdown.is_some())
@@ -775,36 +786,24 @@ impl Mission {
         }
     }
 
-    fn refresh_map(&mut self) {
-        if let Some(p) = &self.perception {
-            self.grid = p.map().project().map(Arc::new);
-        }
-        if let Some(grid) = &self.grid {
-            for d in &mut self.drones {
-                d.set_map(grid.clone());
-            }
-        }
-    }
-
-    fn plan(&mut self, now: f64) {
-        self.refresh_map();
-        let Some(grid) = self.grid.clone() else {
-            return;
+    /// Asks the planner for a step: the map, and while exploring a plan for the exploring
+    /// drones. Taken by [`Mission::take_plan`] when it comes; a step still being worked on is
+    /// not asked again.
+    fn ask_plan(&mut self, now: f64) {
+        let exploring: Vec<usize> = if matches!(self.state, MissionState::Exploring) {
+            (0..self.drones.len())
+                .filter(|&k| self.drones[k].phase == Phase::Exploring)
+                .collect()
+        } else {
+            vec![]
         };
-        let exploring: Vec<usize> = (0..self.drones.len())
-            .filter(|&k| self.drones[k].phase == Phase::Exploring)
-            .collect();
-        if exploring.is_empty() {
-            return;
-        }
         let robots: Vec<Option<[f64; 2]>> = exploring
             .iter()
-            .map(|&k| {
-                let p = self.drones[k].plan_position(&self.config.drone)?;
-                grid.cell_of(p).map(|_| p)
-            })
+            .map(|&k| self.drones[k].plan_position(&self.config.drone))
             .collect();
-        let planners: Vec<PlannerConfig> = self
+        // The goals they fly to now, which each keeps unless another is cheaper by the margin.
+        let held: Vec<Option<[f64; 2]>> = exploring.iter().map(|&k| self.drones[k].goal).collect();
+        let configs: Vec<PlannerConfig> = self
             .config
             .planner_radii
             .iter()
@@ -813,43 +812,69 @@ impl Mission {
                 robot_radius_m,
                 blacklist: self.blacklist.ignored(),
                 region_radius_m: self.config.region_radius_m,
+                held: held.clone(),
+                hold_margin_m: self.config.hold_margin_m,
                 ..PlannerConfig::default()
             })
             .collect();
-        let plan = match nav::mission::plan_first_open(&grid, &robots, &planners) {
-            Ok(Some(plan)) => plan,
+        let elapsed = self.started.map_or(0.0, |s| now - s);
+        let airborne = self.drones.iter().all(|d| d.phase != Phase::TakingOff);
+        let ask = Ask {
+            t: now,
+            drones: exploring,
+            robots,
+            configs,
+            may_end: airborne && elapsed > self.config.min_mission_s,
+        };
+        if self.planner.ask(ask).is_err() {
+            self.planner_stopped(now);
+        }
+    }
+
+    /// The planner's answer, if it has come: the new map to every drone, and the plan's goals
+    /// to the drones still exploring.
+    fn take_plan(&mut self, now: f64) {
+        let answer = match self.planner.answer() {
+            Ok(Some(answer)) => answer,
             Ok(None) => return,
+            Err(PlannerStopped) => return self.planner_stopped(now),
+        };
+        tracing::debug!(
+            projection_ms = answer.seconds[0] * 1e3,
+            planning_ms = answer.seconds[1] * 1e3,
+            drones = answer.ask.drones.len(),
+            "planner step"
+        );
+        if let Some(grid) = &answer.grid {
+            self.grid = Some(grid.clone());
+            for d in &mut self.drones {
+                d.set_map(grid.clone());
+            }
+        }
+        let (Some(grid), Some(plan)) = (answer.grid, answer.plan) else {
+            return;
+        };
+        let plan = match plan {
+            Ok(plan) => plan,
             Err(e) => {
                 tracing::warn!("planner: {e}");
                 return;
             }
         };
-        let elapsed = self.started.map_or(0.0, |s| now - s);
-        // Complete only when every exploring drone could plan: one without a pose might be
-        // the only one that can reach what is left.
-        let all_valid = robots.iter().all(Option::is_some);
-        let airborne = self.drones.iter().all(|d| d.phase != Phase::TakingOff);
-        let ending = plan.complete && all_valid && airborne && elapsed > self.config.min_mission_s;
-        // Frontiers seen but out of reach (a room glimpsed through a door at a slant, the doorway
-        // itself not yet seen as free): before the end, the last resorts — each looked at from
-        // the nearest reachable spot in sight of it, and the thin frontier margin. Only here,
-        // not whenever nothing is reachable: at the start of a flight that lost the camera
-        // bridge's drone (see `plan_first_open`). `gcs replay` does not rerun this step.
-        let plan = match planners.last() {
-            Some(last) if ending && !plan.frontiers.is_empty() => {
-                match nav::mission::plan(&grid, &robots, last) {
-                    Ok(look) if !look.complete => {
-                        tracing::debug!(
-                            out_of_reach = plan.frontiers.len(),
-                            "frontiers out of reach: looked at from where a drone can"
-                        );
-                        look
-                    }
-                    _ => plan,
-                }
-            }
-            _ => plan,
-        };
+        if !matches!(self.state, MissionState::Exploring) {
+            return; // ended while it planned
+        }
+        let Ask {
+            t: asked,
+            drones: exploring,
+            configs,
+            ..
+        } = answer.ask;
+        // What it planned with, recorded as such (a goal may have been given up since).
+        let (held, given_up) = configs
+            .first()
+            .map(|c| (c.held.clone(), c.blacklist.clone()))
+            .unwrap_or_default();
         self.frontiers = plan
             .frontiers
             .iter()
@@ -862,29 +887,32 @@ impl Mission {
             self.drones[k].set_plan(r.goal, r.path.clone(), look_turn, now);
         }
         if let Some(r) = &self.recorder
-            && now - self.last_plan_record >= 1.0
+            && asked - self.last_plan_record >= 1.0
         {
+            // At the time it was asked: the positions and the map are that time's.
             r.send(Record::Plan {
-                t: now,
+                t: asked,
                 goals: exploring
                     .iter()
                     .enumerate()
                     .map(|(i, &k)| PlannedGoal {
                         drone: k,
-                        position: robots[i],
+                        position: answer.robots[i],
+                        held: held.get(i).copied().flatten(),
                         goal: plan.robots[i].goal,
                     })
                     .collect(),
                 frontiers: self.frontiers.clone(),
-                given_up: self.blacklist.ignored(),
+                given_up,
             });
             r.send(Record::Grid {
-                t: now,
+                t: asked,
                 grid: grid.clone(),
             });
-            self.last_plan_record = now;
+            self.last_plan_record = asked;
         }
-        if ending && plan.complete {
+        if answer.ending && plan.complete {
+            let elapsed = self.started.map_or(0.0, |s| now - s);
             // Goals given up once may have failed by chance: one more look before the end.
             let released = self.blacklist.second_look(&plan.ignored);
             if released > 0 {
@@ -920,6 +948,20 @@ impl Mission {
             self.never_seen = unseen.len();
             self.finish(Outcome::Completed);
         }
+    }
+
+    /// The planner's thread is gone (a fault): nothing can be planned, so every drone lands.
+    fn planner_stopped(&mut self, now: f64) {
+        if self.planner_lost {
+            return;
+        }
+        self.planner_lost = true;
+        tracing::error!("the mission planner stopped (a fault in it): landing every drone");
+        self.note(
+            now,
+            "the mission planner stopped: landing every drone".into(),
+        );
+        self.operate(Operator::LandAll);
     }
 
     /// Paths home for returning drones.

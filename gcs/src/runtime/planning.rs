@@ -1,0 +1,271 @@
+//! The mission planner's work, off the mission loop: projecting the 3D map to the 2D grid and
+//! planning on it take a large map a good part of a second (building 31, debug build), and the
+//! loop must fly the drones at 10 Hz meanwhile. When it waited for them, the drones went a
+//! second and more of mission time without a filter update or a stick command: their filters'
+//! heights ran off during take-offs, the poses expired, and both drones landed for "no pose"
+//! while their cameras and the SLAM worked.
+
+use std::sync::Arc;
+use std::sync::mpsc::{Receiver, Sender, TryRecvError, channel};
+use std::time::Instant;
+
+use nav::grid::Grid;
+use nav::mission::{Plan, PlanError, PlannerConfig, plan, plan_first_open};
+use slam::livemap::MapHandle;
+
+/// What the mission asks of the planner at one step.
+#[derive(Debug, Clone)]
+pub struct Ask {
+    /// Mission time of the step, seconds.
+    pub t: f64,
+    /// The exploring drones to plan for (indices); none: only the map is wanted.
+    pub drones: Vec<usize>,
+    /// Where each is (x, y), `None` without a position good enough to plan from.
+    pub robots: Vec<Option<[f64; 2]>>,
+    /// The planner's settings, widest robot radius first ([`plan_first_open`]), with the goals
+    /// given up and the goals held.
+    pub configs: Vec<PlannerConfig>,
+    /// The mission may end on this step if nothing reachable is left (every drone airborne,
+    /// the shortest mission flown).
+    pub may_end: bool,
+}
+
+/// The planner's answer to an [`Ask`].
+#[derive(Debug)]
+pub struct Answer {
+    /// What was asked.
+    pub ask: Ask,
+    /// The 2D map, `None` while the SLAM has mapped nothing.
+    pub grid: Option<Arc<Grid>>,
+    /// The positions planned from: those asked, but `None` for one outside the map.
+    pub robots: Vec<Option<[f64; 2]>>,
+    /// The plan, when drones were asked for and there is a map.
+    pub plan: Option<Result<Plan, PlanError>>,
+    /// No reachable frontier is left, every drone could plan, and the mission may end: the
+    /// last resorts ([`plan`] with the thinnest settings, looking at frontiers out of reach
+    /// from afar) were tried and the plan is theirs if they found something.
+    pub ending: bool,
+    /// Wall time of the projection and of the planning, seconds.
+    pub seconds: [f64; 2],
+}
+
+/// The planner's thread: one step at a time, the next asked only once the last is answered.
+pub struct Planner {
+    asks: Sender<Ask>,
+    answers: Receiver<Answer>,
+    busy: bool,
+}
+
+/// The planner's thread ended (it panicked): the mission cannot plan any more.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PlannerStopped;
+
+impl Planner {
+    /// Starts the thread, which projects `map` at every step.
+    pub fn start(map: MapHandle) -> std::io::Result<Self> {
+        let (asks, rx) = channel::<Ask>();
+        let (tx, answers) = channel();
+        std::thread::Builder::new()
+            .name("planner".into())
+            .spawn(move || {
+                for ask in rx {
+                    if tx.send(work(&map, ask)).is_err() {
+                        return;
+                    }
+                }
+            })?;
+        Ok(Self {
+            asks,
+            answers,
+            busy: false,
+        })
+    }
+
+    /// Asks for a step unless the last is still being worked on; whether it asked.
+    pub fn ask(&mut self, ask: Ask) -> Result<bool, PlannerStopped> {
+        if self.busy {
+            return Ok(false);
+        }
+        self.asks.send(ask).map_err(|_| PlannerStopped)?;
+        self.busy = true;
+        Ok(true)
+    }
+
+    /// The answer to the step asked, if it has come.
+    pub fn answer(&mut self) -> Result<Option<Answer>, PlannerStopped> {
+        match self.answers.try_recv() {
+            Ok(answer) => {
+                self.busy = false;
+                Ok(Some(answer))
+            }
+            Err(TryRecvError::Empty) => Ok(None),
+            Err(TryRecvError::Disconnected) => Err(PlannerStopped),
+        }
+    }
+
+    /// Waits for the answer to the step asked, if one was (tests).
+    #[cfg(test)]
+    pub fn wait(&mut self) -> Option<Answer> {
+        if !self.busy {
+            return None;
+        }
+        self.busy = false;
+        self.answers.recv().ok()
+    }
+}
+
+fn work(map: &MapHandle, ask: Ask) -> Answer {
+    let started = Instant::now();
+    let grid = map.project().map(Arc::new);
+    let projected = started.elapsed().as_secs_f64();
+    let robots: Vec<Option<[f64; 2]>> = ask
+        .robots
+        .iter()
+        .map(|p| p.filter(|p| grid.as_ref().is_some_and(|g| g.cell_of(*p).is_some())))
+        .collect();
+    let mut ending = false;
+    let plan = match &grid {
+        Some(grid) if !ask.drones.is_empty() => {
+            plan_first_open(grid, &robots, &ask.configs)
+                .transpose()
+                .map(|first| {
+                    let first = first?;
+                    // Complete only when every exploring drone could plan: one without a pose
+                    // might be the only one that can reach what is left.
+                    ending = first.complete && ask.may_end && robots.iter().all(Option::is_some);
+                    Ok(match ask.configs.last() {
+                        Some(last) if ending && !first.frontiers.is_empty() => {
+                            last_resorts(grid, &robots, last, first)
+                        }
+                        _ => first,
+                    })
+                })
+        }
+        _ => None,
+    };
+    let planned = started.elapsed().as_secs_f64() - projected;
+    Answer {
+        ask,
+        grid,
+        robots,
+        plan,
+        ending,
+        seconds: [projected, planned],
+    }
+}
+
+/// Frontiers seen but out of reach (a room glimpsed through a door at a slant, the doorway
+/// itself not yet seen as free): before the end, each looked at from the nearest reachable
+/// spot in sight of it, with the thin frontier margin. Only here, not whenever nothing is
+/// reachable: at the start of a flight that lost the camera bridge's drone (see
+/// [`plan_first_open`]). `gcs replay` does not rerun this step.
+fn last_resorts(
+    grid: &Grid,
+    robots: &[Option<[f64; 2]>],
+    last: &PlannerConfig,
+    first: Plan,
+) -> Plan {
+    match plan(grid, robots, last) {
+        Ok(look) if !look.complete => {
+            tracing::debug!(
+                out_of_reach = first.frontiers.len(),
+                "frontiers out of reach: looked at from where a drone can"
+            );
+            look
+        }
+        _ => first,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Isometry3, Point3};
+    use slam::livemap::{LiveMap, NodeCloud};
+    use slam::occupancy::OccupancyConfig;
+
+    /// A camera 1 m up at the origin that saw a round room of 3 m radius, its wall open to the
+    /// east (a quarter of it missing) or closed.
+    fn room(open: bool) -> LiveMap {
+        let mut map = LiveMap::new(OccupancyConfig::default());
+        let cloud: Vec<Point3<f32>> = (0..1440)
+            .map(|i| f64::from(i) / 4.0)
+            .filter(|deg| !(open && (*deg < 45.0 || *deg >= 315.0)))
+            .flat_map(|deg: f64| {
+                // A wall spans several voxels of its column (a lone one is noise to the map).
+                let a = deg.to_radians();
+                [-0.2, -0.1, 0.0, 0.1, 0.2]
+                    .map(|z| Point3::new((3.0 * a.cos()) as f32, (3.0 * a.sin()) as f32, z))
+            })
+            .collect();
+        map.insert(&NodeCloud {
+            node: 0,
+            map_from_camera: Isometry3::translation(0.0, 0.0, 1.0),
+            cloud: Arc::new(cloud),
+        });
+        map
+    }
+
+    fn ask(drones: Vec<usize>, robots: Vec<Option<[f64; 2]>>) -> Ask {
+        Ask {
+            t: 7.0,
+            drones,
+            robots,
+            configs: vec![PlannerConfig::default()],
+            may_end: true,
+        }
+    }
+
+    #[test]
+    fn a_step_is_worked_on_the_planners_thread_and_answered_once() {
+        let map = room(true);
+        let mut planner = Planner::start(map.handle()).expect("a thread");
+        // The map alone.
+        assert_eq!(planner.ask(ask(vec![], vec![])), Ok(true));
+        // One step at a time: asked again before the answer, it is not asked.
+        assert_eq!(planner.ask(ask(vec![0], vec![Some([0.0, 0.0])])), Ok(false));
+        let answer = planner.wait().expect("an answer");
+        assert_eq!(answer.ask.t, 7.0);
+        assert!(answer.plan.is_none());
+        let grid = answer.grid.expect("the room mapped");
+        assert_eq!(grid.resolution(), 0.05);
+        assert!(answer.seconds.iter().all(|s| *s >= 0.0));
+        assert!(matches!(planner.answer(), Ok(None)));
+        // A plan for a drone in the room: to the east, where it saw nothing (the wedge of
+        // unknown from the camera out through the opening).
+        assert_eq!(planner.ask(ask(vec![0], vec![Some([0.0, 0.0])])), Ok(true));
+        let answer = planner.wait().expect("an answer");
+        let plan = answer.plan.expect("a plan").expect("planned");
+        let goal = plan.robots[0].goal.expect("a goal");
+        assert!(goal[0] > 0.0 && goal[1].abs() <= goal[0] + 0.2, "{goal:?}");
+        assert!(!answer.ending, "a frontier is left");
+        // A drone off the map plans as one without a position, and the mission may not end on
+        // a plan it could not take part in.
+        assert_eq!(
+            planner.ask(ask(vec![0, 1], vec![Some([0.0, 0.0]), Some([50.0, 0.0])])),
+            Ok(true)
+        );
+        let answer = planner.wait().expect("an answer");
+        assert_eq!(answer.robots, vec![Some([0.0, 0.0]), None]);
+        let plan = answer.plan.expect("a plan").expect("planned");
+        assert_eq!(plan.robots[1].hover_reason, Some("pose invalid"));
+        assert!(!answer.ending);
+    }
+
+    #[test]
+    fn a_room_with_nothing_left_to_explore_ends_the_mission_only_when_it_may() {
+        let map = room(false);
+        let mut planner = Planner::start(map.handle()).expect("a thread");
+        for may_end in [false, true] {
+            let asked = Ask {
+                may_end,
+                ..ask(vec![0], vec![Some([0.0, 0.0])])
+            };
+            assert_eq!(planner.ask(asked), Ok(true));
+            let answer = planner.wait().expect("an answer");
+            let plan = answer.plan.expect("a plan").expect("planned");
+            assert!(plan.complete, "{} frontiers", plan.frontiers.len());
+            assert_eq!(answer.ending, may_end);
+        }
+    }
+}
