@@ -69,8 +69,8 @@ pub struct SimArgs {
     #[arg(long, value_name = "METRES", default_value_t = PlannerConfig::default().region_radius_m)]
     pub region_radius: f64,
     /// A drone keeps the frontier it flies to unless another is cheaper by more than this,
-    /// metres of path; 0: every plan assigns afresh (two drones whose costs nearly tie may then
-    /// swap their goals at every plan).
+    /// metres of path; 0 (the default): every plan assigns afresh (two drones whose costs nearly
+    /// tie may then swap their goals at every plan).
     #[arg(long, value_name = "METRES", default_value_t = PlannerConfig::default().hold_margin_m)]
     pub hold_margin: f64,
     /// How a drone looks around at a goal: turning the short way to what the map shows

@@ -76,7 +76,9 @@ pub struct PlannerConfig {
     pub held: Vec<Option<[f64; 2]>>,
     /// What holding on to its goal is worth to a robot, metres of path: another frontier takes
     /// it away only when cheaper by more than this (or when the assignment as a whole gains
-    /// more).
+    /// more). 0 (the default): every step assigns afresh. Off by default: on the apartment
+    /// (true poses, seeds 0–1, side by side) 1 m made missions slower with the Hungarian
+    /// assignment (1, 2, 4 drones: 272 → 357 s, 155 → 177 s, 97 → 117 s on average).
     pub hold_margin_m: f64,
 }
 
@@ -96,7 +98,7 @@ impl Default for PlannerConfig {
             frontier_margin_m: 0.1,
             region_radius_m: 0.0,
             held: vec![],
-            hold_margin_m: 1.0,
+            hold_margin_m: 0.0,
         }
     }
 }
@@ -1048,13 +1050,14 @@ mod tests {
         let off = |g: [f64; 2]| Some([g[0], g[1] + 0.5]);
         let holding = PlannerConfig {
             held: vec![off(goal(1)), off(goal(0))],
+            hold_margin_m: 1.0,
             ..toy_config()
         };
         let kept = plan(&corridor, &side_by_side, &holding).unwrap();
         assert_eq!(left(&kept), [false, true]);
-        // The held goals are only what the margin makes of them.
+        // The held goals are only what the margin makes of them (none by default).
         let no_margin = PlannerConfig {
-            hold_margin_m: 0.0,
+            hold_margin_m: PlannerConfig::default().hold_margin_m,
             ..holding.clone()
         };
         assert_eq!(
@@ -1067,7 +1070,7 @@ mod tests {
                 Some([goal(1)[0] - 1.5, 0.75]),
                 Some([goal(0)[0] + 1.5, 0.75]),
             ],
-            ..toy_config()
+            ..holding.clone()
         };
         assert_eq!(
             left(&plan(&corridor, &side_by_side, &far).unwrap()),

@@ -1,9 +1,9 @@
 //! The mission planner's work, off the mission loop: projecting the 3D map to the 2D grid and
-//! planning on it take a large map a good part of a second (building 31, debug build), and the
-//! loop must fly the drones at 10 Hz meanwhile. When it waited for them, the drones went a
-//! second and more of mission time without a filter update or a stick command: their filters'
-//! heights ran off during take-offs, the poses expired, and both drones landed for "no pose"
-//! while their cameras and the SLAM worked.
+//! planning on it take a large map a good part of a second (building 31, dev build: up to
+//! 1.5 s), and the loop must fly the drones at 10 Hz meanwhile. When it waited for them, the
+//! drones went a second and more of mission time without a filter update or a stick command:
+//! their filters' heights ran off during take-offs, the poses expired, and both drones landed
+//! for "no pose" while their cameras and the SLAM worked.
 
 use std::sync::Arc;
 use std::sync::mpsc::{Receiver, Sender, TryRecvError, channel};
