@@ -54,8 +54,8 @@ pub struct SimArgs {
     /// simulator's ground truth (`truth`, to measure navigation alone).
     #[arg(long, value_enum, default_value_t = PoseSource::Slam)]
     pub poses: PoseSource,
-    /// Each drone's flight time on one battery at hover, minutes (the low-battery return comes
-    /// at 25 % left).
+    /// Each drone's flight time on one battery at hover, minutes (a drone turns home when what
+    /// is left, less a 15 % reserve, would only just bring it back from where it is).
     #[arg(long, value_name = "MINUTES", default_value_t = 12.0)]
     pub flight_time: f64,
     /// Swap batteries: a drone home for a low battery gets a charged one this many simulated

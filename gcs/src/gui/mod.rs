@@ -588,6 +588,7 @@ mod tests {
                 mode: Some("ALT_HOLD".into()),
                 ..Telemetry::default()
             },
+            battery_home_at: Some(38.4),
             pose: Some([1.0 + id as f64, 2.0, 0.9, 0.5]),
             pose_sigma: 0.05,
             slam: RobotState::Tracking,
@@ -643,6 +644,7 @@ mod tests {
         d2.slam = RobotState::Lost;
         d2.pose = None;
         d2.left_mission = Some("link lost".into());
+        d2.battery_home_at = None;
         let (mut h, _rx) = window(snapshot(
             MissionState::Exploring,
             vec![drone(0, Phase::Exploring, LinkState::Connected), d2],
@@ -657,7 +659,7 @@ mod tests {
         h.get_by_label("last message 0.1 s ago");
         assert_eq!(h.get_all_by_label("mode ALT_HOLD").count(), 2);
         h.get_by_label("armed");
-        h.get_by_label_contains("11.8 V  76 %");
+        h.get_by_label_contains("11.8 V  76 % · home at 38 %");
         h.get_by_label("tracking");
         h.get_by_label("σ 0.05 m");
         assert_eq!(h.get_all_by_label("target (4.0, 3.0) m").count(), 2);
@@ -666,7 +668,9 @@ mod tests {
         h.get_by_label("last message 4.2 s ago");
         h.get_by_label("lost");
         h.get_by_label("no pose");
+        // Its link lost, nothing says when it turns home.
         h.get_by_label_contains("11.4 V  46 %");
+        assert_eq!(h.get_all_by_label_contains("home at").count(), 1);
         // Why drone 2 left the mission; drone 1 has not.
         h.get_by_label("left the mission: link lost");
         assert_eq!(h.get_all_by_label_contains("left the mission").count(), 1);

@@ -218,7 +218,12 @@ impl Default for DroneConfig {
             blind_brake_max: 0.15,
             blind_brake_band: 0.03,
             battery: battery::Limits {
-                low_pct: 25,
+                // The simulated vehicle's battery failsafe lands it at 10 %.
+                reserve_pct: 15,
+                home_pace_mps: 0.3,
+                landing_s: 10.0,
+                home_margin: 1.5,
+                drain_after_pct: 5,
                 // A LiPo cell under hover load; about 23 % left in the simulator's pack.
                 low_cell_v: 3.75,
                 low_for_s: 3.0,
@@ -388,6 +393,8 @@ pub struct Drone {
     charged_since: Option<f64>,
     /// Its battery as read so far.
     gauge: battery::Gauge,
+    /// The length of its way home on the last map planned on, metres.
+    way_home_m: Option<f64>,
     /// Charged batteries it took off again on.
     pub battery_swaps: u32,
 }
@@ -458,6 +465,7 @@ impl Drone {
             awaits_battery: false,
             charged_since: None,
             gauge: battery::Gauge::default(),
+            way_home_m: None,
             battery_swaps: 0,
         }
     }
@@ -688,6 +696,23 @@ impl Drone {
         self.goal = goal;
         self.look_turn = look_turn;
         self.follower.set_path(path);
+    }
+
+    /// The charge at which it turns home from where it is, percent, while it explores
+    /// ([`battery::Gauge::home_at_pct`]).
+    pub fn battery_home_at(&self) -> Option<f64> {
+        matches!(
+            self.phase,
+            Phase::Exploring | Phase::TakingOff | Phase::Holding
+        )
+        .then(|| self.gauge.home_at_pct())
+        .flatten()
+    }
+
+    /// The length of its way home on the map just planned on, metres (`None`: no way known);
+    /// what its low-battery return is sized to.
+    pub fn set_way_home(&mut self, metres: Option<f64>) {
+        self.way_home_m = metres;
     }
 
     /// A path home (returning drones only).
@@ -978,17 +1003,29 @@ impl Drone {
         {
             self.return_home(&format!("no camera frame for {:.0} s", now - last));
         }
-        // Low battery: home.
-        if let Some(why) = self
+        // Low battery, for the way home from here: home. The way on the last map, or, longer,
+        // the straight line (the map's way may be a few seconds old).
+        let straight_home = self
+            .start
+            .zip(self.plan_position(config))
+            .map(|([x, y, _], p)| (p[0] - x).hypot(p[1] - y));
+        let home_m = match (self.way_home_m, straight_home) {
+            (Some(a), Some(b)) => Some(a.max(b)),
+            (a, b) => a.or(b),
+        };
+        if let Some(low) = self
             .gauge
-            .low(now, telemetry.battery.as_ref(), &config.battery)
+            .low(now, telemetry.battery.as_ref(), home_m, &config.battery)
             && matches!(
                 self.phase,
                 Phase::Exploring | Phase::TakingOff | Phase::Holding
             )
         {
             self.awaits_battery = config.battery_swap.is_some();
-            self.return_home(&why);
+            if let Some(way) = &low.way_home {
+                self.say(format!("{}: {way}", low.reading));
+            }
+            self.return_home(&low.reading);
         }
         let Some(pose) = self.pose() else {
             return self.fly_blind(
@@ -2215,6 +2252,53 @@ mod tests {
     }
 
     #[test]
+    fn a_drone_turns_home_when_its_charge_would_only_just_bring_it_back_from_where_it_is() {
+        let config = DroneConfig::default();
+        // Two drones 3 m from their starts on packs at 50 % draining as the simulator's (12
+        // minutes from full), one with a way home of 40 m on the map, one with 0.5 m (the
+        // straight line counts then).
+        let mut turned = vec![];
+        for way_home in [40.0, 0.5] {
+            let vehicle = Arc::new(StubbornVehicle::default());
+            let mut drone = exploring_drone(vehicle.clone(), &config);
+            drone.set_way_home(Some(way_home));
+            let mut t = 0.0f64;
+            while drone.phase == Phase::Exploring && t < 100.0 {
+                *vehicle.battery_pct.lock().unwrap() = Some((50.0 - t / 7.2).round() as u8);
+                drone.slam_fix(t, [3.0, 0.0, 0.9], 0.0, None, true);
+                drone.tick(t, &config);
+                t += 0.1;
+            }
+            turned.push((
+                t,
+                drone.phase,
+                drone.left_mission.clone(),
+                drone.battery_home_at(),
+            ));
+            if way_home == 40.0 {
+                let said = drone.take_messages();
+                assert!(
+                    said.iter().any(|m| m
+                        == "battery at 45 %: 40 m from its start: about 33 % to get there and land, 15 % to spare"),
+                    "{said:?}"
+                );
+            }
+        }
+        // 40 m out needs about 30 % (133 s at 0.3 m/s and 10 s to land, times 1.5), so it
+        // turns as soon as the drain is measured (on reading 45 %, from 32.4 s; measured over
+        // whole percent, a little high then); beside its start, it flies on.
+        assert!((32.4..32.6).contains(&turned[0].0), "{turned:?}");
+        assert_eq!(turned[0].1, Phase::Returning);
+        assert_eq!(turned[0].2.as_deref(), Some("battery at 45 %"));
+        assert_eq!(turned[1].1, Phase::Exploring, "{turned:?}");
+        assert_eq!(turned[1].2, None);
+        // It would turn home, from 3 m, at 15 % and the 4 % that needs.
+        let home_at = turned[1].3.expect("shown while it explores");
+        assert!((18.5..20.0).contains(&home_at), "{home_at}");
+        assert_eq!(turned[0].3, None, "not shown on the way home");
+    }
+
+    #[test]
     fn a_drone_home_for_its_battery_rejoins_on_a_charged_one_only_when_told_to() {
         for swap in [Some(BatterySwap::default()), None] {
             let config = DroneConfig {
@@ -2224,11 +2308,11 @@ mod tests {
             let vehicle = Arc::new(StubbornVehicle::default());
             let battery = |pct: u8| *vehicle.battery_pct.lock().unwrap() = Some(pct);
             let mut drone = exploring_drone(vehicle.clone(), &config);
-            battery(24);
+            battery(14);
             drone.tick(0.1, &config);
             // Home (it is at its start already): it lands, and the vehicle disarms.
             assert_eq!(drone.phase, Phase::Landing);
-            assert_eq!(drone.left_mission.as_deref(), Some("battery at 24 %"));
+            assert_eq!(drone.left_mission.as_deref(), Some("battery at 14 %"));
             assert_eq!(drone.awaits_battery, swap.is_some());
             vehicle
                 .disarmed
@@ -2257,7 +2341,7 @@ mod tests {
             if swap.is_none() {
                 assert!(rejoined.is_empty());
                 assert_eq!(drone.phase, Phase::Landed);
-                assert_eq!(drone.left_mission.as_deref(), Some("battery at 24 %"));
+                assert_eq!(drone.left_mission.as_deref(), Some("battery at 14 %"));
                 continue;
             }
             assert_eq!(rejoined, [8.1]);

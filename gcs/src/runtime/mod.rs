@@ -199,6 +199,9 @@ pub struct DroneView {
     pub link: LinkStatus,
     /// Latest telemetry.
     pub telemetry: Telemetry,
+    /// The charge at which it turns home from where it is, percent (while it explores, once
+    /// its pack's drain is measured).
+    pub battery_home_at: Option<f64>,
     /// The filter's pose (x, y, z, yaw), if valid.
     pub pose: Option<[f64; 4]>,
     /// Standard deviation of the filter's horizontal position, metres.
@@ -819,12 +822,17 @@ impl Mission {
             .collect();
         let elapsed = self.started.map_or(0.0, |s| now - s);
         let airborne = self.drones.iter().all(|d| d.phase != Phase::TakingOff);
+        let homes = exploring
+            .iter()
+            .map(|&k| self.drones[k].start.map(|[x, y, _]| [x, y]))
+            .collect();
         let ask = Ask {
             t: now,
             drones: exploring,
             robots,
             configs,
             may_end: airborne && elapsed > self.config.min_mission_s,
+            homes,
         };
         if self.planner.ask(ask).is_err() {
             self.planner_stopped(now);
@@ -882,6 +890,7 @@ impl Mission {
             .collect();
         self.given_up_left = self.blacklist.hiding(&plan.ignored).len();
         for (i, &k) in exploring.iter().enumerate() {
+            self.drones[k].set_way_home(answer.ways_home.get(i).copied().flatten());
             let r = &plan.robots[i];
             let look_turn = r.goal.and_then(|g| self.blacklist.look_turn(g));
             self.drones[k].set_plan(r.goal, r.path.clone(), look_turn, now);
@@ -1018,6 +1027,7 @@ impl Mission {
                 left_mission: d.why_away(),
                 link: d.link.status(),
                 telemetry: d.link.telemetry(),
+                battery_home_at: d.battery_home_at(),
                 pose: d.pose(),
                 pose_sigma: d.ekf.estimate().position_sigma,
                 slam: view.robots.get(k).map_or(RobotState::Waiting, |r| r.state),

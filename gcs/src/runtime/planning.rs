@@ -11,6 +11,7 @@ use std::time::Instant;
 
 use nav::grid::Grid;
 use nav::mission::{Plan, PlanError, PlannerConfig, plan, plan_first_open};
+use nav::search::{astar, metres, nearest_free};
 use slam::livemap::MapHandle;
 
 /// What the mission asks of the planner at one step.
@@ -28,6 +29,8 @@ pub struct Ask {
     /// The mission may end on this step if nothing reachable is left (every drone airborne,
     /// the shortest mission flown).
     pub may_end: bool,
+    /// Where each drone asked for started (x, y), to find its way home.
+    pub homes: Vec<Option<[f64; 2]>>,
 }
 
 /// The planner's answer to an [`Ask`].
@@ -45,6 +48,9 @@ pub struct Answer {
     /// last resorts ([`plan`] with the thinnest settings, looking at frontiers out of reach
     /// from afar) were tried and the plan is theirs if they found something.
     pub ending: bool,
+    /// Each drone's way home on the plan's map (its inflated walls), metres: `None` without a
+    /// position, a home or a way between them.
+    pub ways_home: Vec<Option<f64>>,
     /// Wall time of the projection and of the planning, seconds.
     pub seconds: [f64; 2],
 }
@@ -143,6 +149,10 @@ fn work(map: &MapHandle, ask: Ask) -> Answer {
         }
         _ => None,
     };
+    let ways_home = match (&plan, ask.configs.first()) {
+        (Some(Ok(plan)), Some(widest)) => ways_home(plan, &robots, &ask.homes, widest),
+        _ => vec![None; robots.len()],
+    };
     let planned = started.elapsed().as_secs_f64() - projected;
     Answer {
         ask,
@@ -150,8 +160,30 @@ fn work(map: &MapHandle, ask: Ask) -> Answer {
         robots,
         plan,
         ending,
+        ways_home,
         seconds: [projected, planned],
     }
+}
+
+/// The length of each robot's shortest way to its home on the plan's inflated map (both ends
+/// moved to the nearest free cell, as the planner moves them), metres.
+fn ways_home(
+    plan: &Plan,
+    robots: &[Option<[f64; 2]>],
+    homes: &[Option<[f64; 2]>],
+    widest: &PlannerConfig,
+) -> Vec<Option<f64>> {
+    let map = &plan.inflated;
+    let reach = (widest.robot_radius_m / map.resolution()).ceil() as usize * 2 + 2;
+    let free = |p: [f64; 2]| nearest_free(map, map.cell_of(p)?, reach);
+    robots
+        .iter()
+        .zip(homes.iter().chain(std::iter::repeat(&None)))
+        .map(|(robot, home)| {
+            let (a, b) = (free((*robot)?)?, free((*home)?)?);
+            astar(map, a, b).map(|(cost, _)| metres(map, cost))
+        })
+        .collect()
 }
 
 /// Frontiers seen but out of reach (a room glimpsed through a door at a slant, the doorway
@@ -213,6 +245,7 @@ mod tests {
             robots,
             configs: vec![PlannerConfig::default()],
             may_end: true,
+            homes: vec![Some([0.0, 0.0]); 1],
         }
     }
 
@@ -267,5 +300,37 @@ mod tests {
             assert!(plan.complete, "{} frontiers", plan.frontiers.len());
             assert_eq!(answer.ending, may_end);
         }
+    }
+
+    #[test]
+    fn each_drones_way_home_is_measured_on_the_plans_map() {
+        let map = room(false);
+        let mut planner = Planner::start(map.handle()).expect("a thread");
+        // Three drones in the room, homes across it, at it, and one off the map; a fourth
+        // drone off the map itself.
+        let asked = Ask {
+            homes: vec![
+                Some([-1.5, 0.0]),
+                Some([0.0, 1.0]),
+                Some([40.0, 0.0]),
+                Some([0.0, 0.0]),
+            ],
+            ..ask(
+                vec![0, 1, 2, 3],
+                vec![
+                    Some([1.5, 0.0]),
+                    Some([0.0, 1.0]),
+                    Some([0.0, 0.0]),
+                    Some([0.0, 40.0]),
+                ],
+            )
+        };
+        assert_eq!(planner.ask(asked), Ok(true));
+        let ways = planner.wait().expect("an answer").ways_home;
+        assert_eq!(ways.len(), 4);
+        let across = ways[0].expect("a way across the room");
+        assert!((across - 3.0).abs() < 0.11, "{across}");
+        assert_eq!(ways[1], Some(0.0));
+        assert_eq!(ways[2..], [None, None]);
     }
 }
