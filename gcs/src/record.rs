@@ -227,6 +227,16 @@ pub enum Record {
         /// The command.
         command: String,
     },
+    /// What the station told the operator ("drone 2: battery at 35 %: returning to its
+    /// start", "no reachable frontier left …"), written on `/station`.
+    StationText {
+        /// Mission clock, seconds.
+        t: f64,
+        /// A warning (a fault) rather than news.
+        warning: bool,
+        /// The message.
+        text: String,
+    },
 }
 
 enum Message {
@@ -779,6 +789,23 @@ fn write_record(w: &mut McapWriter, ch: &mut Channels, r: &Record) -> Result<u64
                 level: log_level(text.severity) as i32,
                 message: text.text.clone(),
                 name: format!("drone{}", drone + 1),
+                file: String::new(),
+                line: 0,
+            };
+            ch.write(w, c, *t, &encode(&m)?)?;
+            Ok(1)
+        }
+        Record::StationText { t, warning, text } => {
+            let c = ch.foxglove::<Log>(w, "/station")?;
+            let m = Log {
+                timestamp: stamp(*t),
+                level: if *warning {
+                    Level::Warning
+                } else {
+                    Level::Info
+                } as i32,
+                message: text.clone(),
+                name: "station".into(),
                 file: String::new(),
                 line: 0,
             };

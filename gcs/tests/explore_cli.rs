@@ -53,6 +53,18 @@ fn mcap_topics(path: &Path) -> (std::collections::BTreeMap<String, String>, usiz
     (topics, count)
 }
 
+/// The messages of a `foxglove.Log` topic of an MCAP file, as text: protobuf keeps a string's
+/// bytes as they are, so the printable runs of each message hold its text.
+fn mcap_texts(path: &Path, topic: &str) -> Vec<String> {
+    let bytes = std::fs::read(path).expect("mission.mcap");
+    mcap::MessageStream::new(&bytes)
+        .expect("an MCAP file")
+        .map(|m| m.expect("a readable message"))
+        .filter(|m| m.channel.topic == topic)
+        .map(|m| String::from_utf8_lossy(&m.data).into_owned())
+        .collect()
+}
+
 #[test]
 fn two_drones_explore_the_default_world_land_and_write_their_outputs() {
     // Navigation on the simulator's poses (the SLAM maps on them): the map must be complete.
@@ -143,6 +155,8 @@ fn two_drones_explore_the_default_world_land_and_write_their_outputs() {
         // What the autopilots said ("Arming motors").
         ("/drone1/status", "foxglove.Log"),
         ("/drone2/status", "foxglove.Log"),
+        // What the station said ("drone 1: armed: taking off").
+        ("/station", "foxglove.Log"),
     ] {
         assert_eq!(
             topics.get(topic).map(String::as_str),
@@ -151,6 +165,16 @@ fn two_drones_explore_the_default_world_land_and_write_their_outputs() {
         );
     }
     assert!(messages > 1000, "{messages} messages");
+    let said = mcap_texts(&out.join("mission.mcap"), "/station");
+    for text in [
+        "drone 1: armed: taking off",
+        "no reachable frontier left after",
+    ] {
+        assert!(
+            said.iter().any(|s| s.contains(text)),
+            "{text:?} in {said:?}"
+        );
+    }
     // MAVLink traffic as .tlog: 8-byte timestamps before each packet, MAVLink 2 frames.
     let tlog = std::fs::read(out.join("drone1.tlog")).expect("drone1.tlog");
     assert!(tlog.len() > 1000 && tlog[8] == 0xFD, "{} bytes", tlog.len());
@@ -442,8 +466,17 @@ fn a_drone_whose_camera_dies_and_one_whose_battery_runs_low_go_home_and_the_thir
         stderr.contains("drone 2: no camera frame for 5 s: returning to its start"),
         "{stderr}"
     );
+    // 20 % is above the reserve, but a pack that lost 80 % in 40 s needs more than that to
+    // come home from anywhere: sized to its way home, it is low.
     assert!(
         stderr.contains("drone 3: battery at 20 %: returning to its start"),
+        "{stderr}"
+    );
+    assert!(
+        stderr
+            .lines()
+            .any(|l| l.contains("drone 3: battery at 20 %: ")
+                && l.contains(" m from its start: about ")),
         "{stderr}"
     );
     assert!(stderr.contains("drone 3: home: landing"), "{stderr}");

@@ -30,11 +30,10 @@ pub struct Limits {
     /// Low below this charge wherever the drone is, percent (vehicles that estimate it): what
     /// must be left on landing.
     pub reserve_pct: u8,
-    /// The way home is taken to be flown at this pace (its turns and look-free flight; the
-    /// return's own pace measured on building 31), m/s …
+    /// The way home is taken to be flown at this pace, m/s …
     pub home_pace_mps: f64,
-    /// … and the landing to take this long, seconds …
-    pub landing_s: f64,
+    /// … plus this long to turn onto it and land, seconds …
+    pub turn_and_land_s: f64,
     /// … and the charge that needs, at the drain measured so far, times this.
     pub home_margin: f64,
     /// The drain is measured once this much of a pack is used in the air, percent (the charge
@@ -150,7 +149,7 @@ impl Gauge {
             });
         }
         let (rate, home_m) = (drain.rate(limits)?, home_m?);
-        let home_s = home_m.max(0.0) / limits.home_pace_mps.max(0.01) + limits.landing_s;
+        let home_s = home_m.max(0.0) / limits.home_pace_mps.max(0.01) + limits.turn_and_land_s;
         let need = rate * home_s * limits.home_margin;
         self.home_at = Some(f64::from(limits.reserve_pct) + need);
         (f64::from(pct) < f64::from(limits.reserve_pct) + need).then(|| Low {
@@ -199,8 +198,8 @@ mod tests {
 
     const LIMITS: Limits = Limits {
         reserve_pct: 15,
-        home_pace_mps: 0.3,
-        landing_s: 10.0,
+        home_pace_mps: 0.4,
+        turn_and_land_s: 15.0,
         home_margin: 1.5,
         drain_after_pct: 5,
         low_cell_v: 3.75,
@@ -254,25 +253,25 @@ mod tests {
 
     #[test]
     fn a_drone_turns_home_with_what_its_way_home_needs_from_the_drain_measured_in_the_air() {
-        // 30 m out: 100 s at 0.3 m/s and 10 s to land, at 100/720 % a second, times 1.5, is
-        // 23.1 %: it turns on reading 38 % (< 15 + 23.1; from 443 s).
+        // 30 m out: 75 s at 0.4 m/s and 15 s to turn and land, at 100/720 % a second, times
+        // 1.5, is 18.9 %: it turns on reading 33 % (< 15 + 18.9; from 478.8 s).
         let mut g = Gauge::default();
         assert_eq!(g.home_at_pct(), None);
         let (t, why) = fly(&mut g, 0.0, 720.0, 100.0, 30.0).expect("low");
-        assert!((442.0..444.0).contains(&t), "{t}");
-        assert_eq!(why.reading, "battery at 38 %");
-        // What the operator is shown beside the charge: it turns home at 38.1 %.
+        assert!((478.7..479.0).contains(&t), "{t}");
+        assert_eq!(why.reading, "battery at 33 %");
+        // What the operator is shown beside the charge: it turns home at 33.9 %.
         let home_at = g.home_at_pct().expect("known");
-        assert!((38.0..38.2).contains(&home_at), "{home_at}");
+        assert!((33.8..34.0).contains(&home_at), "{home_at}");
         assert_eq!(
             why.way_home.as_deref(),
-            Some("30 m from its start: about 23 % to get there and land, 15 % to spare")
+            Some("30 m from its start: about 19 % to get there and land, 15 % to spare")
         );
-        // A metre from its start it flies on to the reserve and the 2.8 % it needs to land
-        // there: it turns on reading 17 % (from 594 s).
+        // A metre from its start it flies on to the reserve and the 3.7 % it needs to land
+        // there: it turns on reading 18 % (from 586.8 s).
         let (t, why) = fly(&mut Gauge::default(), 0.0, 720.0, 100.0, 1.0).expect("low");
-        assert!((594.0..595.0).contains(&t), "{t}");
-        assert_eq!(why.reading, "battery at 17 %");
+        assert!((586.7..587.0).contains(&t), "{t}");
+        assert_eq!(why.reading, "battery at 18 %");
         // Far away, on a pack half used when first read, the drain is only known once 5 % more
         // is used (reading 45 %, from 132.4 s): the turn comes then, not before and not later.
         let (t, why) = fly(&mut Gauge::default(), 100.0, 720.0, 50.0, 60.0).expect("low");
@@ -291,7 +290,7 @@ mod tests {
         let mut g = Gauge::default();
         assert!(fly(&mut g, 0.0, 300.0, 100.0, 30.0).is_none());
         let (t, _) = fly(&mut g, 900.0, 600.0, 58.3, 30.0).expect("low");
-        assert!((1040.0..1052.0).contains(&t), "{t}");
+        assert!((1078.5..1079.0).contains(&t), "{t}");
         // A charged pack put in is a new pack: its drain is measured afresh, so a pack whose
         // drain is not yet known is low only under the reserve.
         let mut g = Gauge::default();

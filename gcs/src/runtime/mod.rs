@@ -566,7 +566,19 @@ impl Mission {
 
     fn say(&mut self, now: f64, text: String) {
         tracing::info!("{text}");
+        self.record_text(now, false, &text);
         self.note(now, text);
+    }
+
+    /// Writes what the station tells the operator into the mission's log.
+    fn record_text(&self, now: f64, warning: bool, text: &str) {
+        if let Some(r) = &self.recorder {
+            r.send(Record::StationText {
+                t: now,
+                warning,
+                text: text.to_owned(),
+            });
+        }
     }
 
     /// Keeps a message for the operator (the last 50), already logged.
@@ -890,7 +902,9 @@ impl Mission {
             .collect();
         self.given_up_left = self.blacklist.hiding(&plan.ignored).len();
         for (i, &k) in exploring.iter().enumerate() {
-            self.drones[k].set_way_home(answer.ways_home.get(i).copied().flatten());
+            let way_home = answer.ways_home.get(i).copied().flatten();
+            tracing::trace!(drone = k + 1, ?way_home, "its way home");
+            self.drones[k].set_way_home(way_home);
             let r = &plan.robots[i];
             let look_turn = r.goal.and_then(|g| self.blacklist.look_turn(g));
             self.drones[k].set_plan(r.goal, r.path.clone(), look_turn, now);
@@ -966,10 +980,9 @@ impl Mission {
         }
         self.planner_lost = true;
         tracing::error!("the mission planner stopped (a fault in it): landing every drone");
-        self.note(
-            now,
-            "the mission planner stopped: landing every drone".into(),
-        );
+        let text = "the mission planner stopped: landing every drone";
+        self.record_text(now, true, text);
+        self.note(now, text.into());
         self.operate(Operator::LandAll);
     }
 

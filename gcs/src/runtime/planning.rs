@@ -10,6 +10,7 @@ use std::sync::mpsc::{Receiver, Sender, TryRecvError, channel};
 use std::time::Instant;
 
 use nav::grid::Grid;
+use nav::inflate::inflate;
 use nav::mission::{Plan, PlanError, PlannerConfig, plan, plan_first_open};
 use nav::search::{astar, metres, nearest_free};
 use slam::livemap::MapHandle;
@@ -48,8 +49,9 @@ pub struct Answer {
     /// last resorts ([`plan`] with the thinnest settings, looking at frontiers out of reach
     /// from afar) were tried and the plan is theirs if they found something.
     pub ending: bool,
-    /// Each drone's way home on the plan's map (its inflated walls), metres: `None` without a
-    /// position, a home or a way between them.
+    /// Each drone's way home, metres, on the map inflated by the thinnest robot radius (as a
+    /// drone flying home plans): `None` without a plan, a position, a home or a way between
+    /// them.
     pub ways_home: Vec<Option<f64>>,
     /// Wall time of the projection and of the planning, seconds.
     pub seconds: [f64; 2],
@@ -149,8 +151,10 @@ fn work(map: &MapHandle, ask: Ask) -> Answer {
         }
         _ => None,
     };
-    let ways_home = match (&plan, ask.configs.first()) {
-        (Some(Ok(plan)), Some(widest)) => ways_home(plan, &robots, &ask.homes, widest),
+    let ways_home = match (&grid, &plan, ask.configs.last()) {
+        (Some(grid), Some(Ok(_)), Some(thinnest)) => {
+            ways_home(grid, &robots, &ask.homes, thinnest.robot_radius_m)
+        }
         _ => vec![None; robots.len()],
     };
     let planned = started.elapsed().as_secs_f64() - projected;
@@ -165,16 +169,18 @@ fn work(map: &MapHandle, ask: Ask) -> Answer {
     }
 }
 
-/// The length of each robot's shortest way to its home on the plan's inflated map (both ends
-/// moved to the nearest free cell, as the planner moves them), metres.
+/// The length of each robot's shortest way to its home on `grid` inflated by `radius` (the
+/// thinnest robot radius: a drone flying home plans with it, and the wider ones may not pass a
+/// door it flies through), both ends moved to the nearest free cell as the planner moves them;
+/// metres.
 fn ways_home(
-    plan: &Plan,
+    grid: &Grid,
     robots: &[Option<[f64; 2]>],
     homes: &[Option<[f64; 2]>],
-    widest: &PlannerConfig,
+    radius: f64,
 ) -> Vec<Option<f64>> {
-    let map = &plan.inflated;
-    let reach = (widest.robot_radius_m / map.resolution()).ceil() as usize * 2 + 2;
+    let map = &inflate(grid, radius);
+    let reach = (radius / map.resolution()).ceil() as usize * 2 + 2;
     let free = |p: [f64; 2]| nearest_free(map, map.cell_of(p)?, reach);
     robots
         .iter()
@@ -186,11 +192,6 @@ fn ways_home(
         .collect()
 }
 
-/// Frontiers seen but out of reach (a room glimpsed through a door at a slant, the doorway
-/// itself not yet seen as free): before the end, each looked at from the nearest reachable
-/// spot in sight of it, with the thin frontier margin. Only here, not whenever nothing is
-/// reachable: at the start of a flight that lost the camera bridge's drone (see
-/// [`plan_first_open`]). `gcs replay` does not rerun this step.
 fn last_resorts(
     grid: &Grid,
     robots: &[Option<[f64; 2]>],
@@ -303,7 +304,7 @@ mod tests {
     }
 
     #[test]
-    fn each_drones_way_home_is_measured_on_the_plans_map() {
+    fn each_drones_way_home_is_measured_on_the_map() {
         let map = room(false);
         let mut planner = Planner::start(map.handle()).expect("a thread");
         // Three drones in the room, homes across it, at it, and one off the map; a fourth
@@ -332,5 +333,39 @@ mod tests {
         assert!((across - 3.0).abs() < 0.11, "{across}");
         assert_eq!(ways[1], Some(0.0));
         assert_eq!(ways[2..], [None, None]);
+    }
+
+    #[test]
+    fn a_way_home_goes_through_a_door_only_the_thinnest_radius_passes() {
+        // The closed room split by a wall along x = 0 with a door 0.7 m wide in its middle.
+        let mut map = room(false);
+        let wall: Vec<Point3<f32>> = (-60..=60)
+            .map(|i| f64::from(i) * 0.05)
+            .filter(|y| y.abs() > 0.35)
+            .flat_map(|y| [-0.2, -0.1, 0.0, 0.1, 0.2].map(|z| Point3::new(0.0, y as f32, z)))
+            .collect();
+        map.insert(&NodeCloud {
+            node: 1,
+            map_from_camera: Isometry3::translation(0.0, 0.0, 1.0),
+            cloud: Arc::new(wall),
+        });
+        let mut planner = Planner::start(map.handle()).expect("a thread");
+        let radius = |r| PlannerConfig {
+            robot_radius_m: r,
+            ..PlannerConfig::default()
+        };
+        let mut ways = vec![];
+        for configs in [vec![radius(0.4)], vec![radius(0.4), radius(0.25)]] {
+            let asked = Ask {
+                configs,
+                homes: vec![Some([-1.5, 0.0])],
+                ..ask(vec![0], vec![Some([1.5, 0.0])])
+            };
+            assert_eq!(planner.ask(asked), Ok(true));
+            ways.push(planner.wait().expect("an answer").ways_home[0]);
+        }
+        assert_eq!(ways[0], None, "0.4 m does not pass a door of 0.7 m");
+        let through = ways[1].expect("0.25 m passes");
+        assert!((3.0..3.3).contains(&through), "{through}");
     }
 }
