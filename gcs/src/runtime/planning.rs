@@ -192,6 +192,11 @@ fn ways_home(
         .collect()
 }
 
+/// Frontiers seen but out of reach (a room glimpsed through a door at a slant, the doorway
+/// itself not yet seen as free): before the end, each looked at from the nearest reachable
+/// spot in sight of it, with the thin frontier margin. Only here, not whenever nothing is
+/// reachable: at the start of a flight that lost the camera bridge's drone (see
+/// [`plan_first_open`]). `gcs replay` does not rerun this step.
 fn last_resorts(
     grid: &Grid,
     robots: &[Option<[f64; 2]>],
