@@ -783,49 +783,59 @@ fn write_record(w: &mut McapWriter, ch: &mut Channels, r: &Record) -> Result<u64
             Ok(1)
         }
         Record::VehicleText { t, drone, text } => {
-            let c = ch.foxglove::<Log>(w, &format!("/drone{}/status", drone + 1))?;
-            let m = Log {
-                timestamp: stamp(*t),
-                level: log_level(text.severity) as i32,
-                message: text.text.clone(),
-                name: format!("drone{}", drone + 1),
-                file: String::new(),
-                line: 0,
-            };
-            ch.write(w, c, *t, &encode(&m)?)?;
-            Ok(1)
+            let name = format!("drone{}", drone + 1);
+            let topic = format!("/{name}/status");
+            write_log(
+                w,
+                ch,
+                &topic,
+                *t,
+                log_level(text.severity),
+                &text.text,
+                name,
+            )
         }
         Record::StationText { t, warning, text } => {
-            let c = ch.foxglove::<Log>(w, "/station")?;
-            let m = Log {
-                timestamp: stamp(*t),
-                level: if *warning {
-                    Level::Warning
-                } else {
-                    Level::Info
-                } as i32,
-                message: text.clone(),
-                name: "station".into(),
-                file: String::new(),
-                line: 0,
+            let level = if *warning {
+                Level::Warning
+            } else {
+                Level::Info
             };
-            ch.write(w, c, *t, &encode(&m)?)?;
-            Ok(1)
+            write_log(w, ch, "/station", *t, level, text, "station".into())
         }
-        Record::Operator { t, command } => {
-            let c = ch.foxglove::<Log>(w, "/operator")?;
-            let m = Log {
-                timestamp: stamp(*t),
-                level: Level::Info as i32,
-                message: command.clone(),
-                name: "operator".into(),
-                file: String::new(),
-                line: 0,
-            };
-            ch.write(w, c, *t, &encode(&m)?)?;
-            Ok(1)
-        }
+        Record::Operator { t, command } => write_log(
+            w,
+            ch,
+            "/operator",
+            *t,
+            Level::Info,
+            command,
+            "operator".into(),
+        ),
     }
+}
+
+/// Writes one `foxglove.Log` message on `topic`.
+fn write_log(
+    w: &mut McapWriter,
+    ch: &mut Channels,
+    topic: &str,
+    t: f64,
+    level: Level,
+    message: &str,
+    name: String,
+) -> Result<u64, String> {
+    let c = ch.foxglove::<Log>(w, topic)?;
+    let m = Log {
+        timestamp: stamp(t),
+        level: level as i32,
+        message: message.to_owned(),
+        name,
+        file: String::new(),
+        line: 0,
+    };
+    ch.write(w, c, t, &encode(&m)?)?;
+    Ok(1)
 }
 
 /// Foxglove's log level of a syslog (MAVLink `MAV_SEVERITY`) severity.

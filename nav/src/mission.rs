@@ -124,6 +124,8 @@ pub struct RobotPlan {
 pub struct Plan {
     /// The inflated map it planned on.
     pub inflated: Grid,
+    /// The robot radius that map is inflated by, metres.
+    pub robot_radius_m: f64,
     /// The frontiers, largest first (then those [`plan_first_open`] added for robots left without
     /// one).
     pub frontiers: Vec<Frontier>,
@@ -476,6 +478,7 @@ pub fn plan(
     let reachable = raw.iter().flatten().any(Option::is_some);
     Ok(Plan {
         inflated,
+        robot_radius_m: config.robot_radius_m,
         ignored,
         complete: any_valid && !reachable,
         frontiers,

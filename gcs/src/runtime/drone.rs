@@ -1011,10 +1011,11 @@ impl Drone {
             .start
             .zip(self.plan_position(config))
             .map(|([x, y, _], p)| (p[0] - x).hypot(p[1] - y));
-        let home_m = match (self.way_home_m, straight_home) {
-            (Some(a), Some(b)) => Some(a.max(b)),
-            (a, b) => a.or(b),
-        };
+        let home_m = self
+            .way_home_m
+            .into_iter()
+            .chain(straight_home)
+            .reduce(f64::max);
         if let Some(low) = self
             .gauge
             .low(now, telemetry.battery.as_ref(), home_m, &config.battery)

@@ -152,8 +152,8 @@ fn work(map: &MapHandle, ask: Ask) -> Answer {
         _ => None,
     };
     let ways_home = match (&grid, &plan, ask.configs.last()) {
-        (Some(grid), Some(Ok(_)), Some(thinnest)) => {
-            ways_home(grid, &robots, &ask.homes, thinnest.robot_radius_m)
+        (Some(grid), Some(Ok(plan)), Some(thinnest)) => {
+            ways_home(grid, plan, &robots, &ask.homes, thinnest.robot_radius_m)
         }
         _ => vec![None; robots.len()],
     };
@@ -171,15 +171,22 @@ fn work(map: &MapHandle, ask: Ask) -> Answer {
 
 /// The length of each robot's shortest way to its home on `grid` inflated by `radius` (the
 /// thinnest robot radius: a drone flying home plans with it, and the wider ones may not pass a
-/// door it flies through), both ends moved to the nearest free cell as the planner moves them;
-/// metres.
+/// door it flies through; the plan's own map when it is inflated so), both ends moved to the
+/// nearest free cell as the planner moves them; metres.
 fn ways_home(
     grid: &Grid,
+    plan: &Plan,
     robots: &[Option<[f64; 2]>],
     homes: &[Option<[f64; 2]>],
     radius: f64,
 ) -> Vec<Option<f64>> {
-    let map = &inflate(grid, radius);
+    let inflated;
+    let map = if plan.robot_radius_m == radius {
+        &plan.inflated
+    } else {
+        inflated = inflate(grid, radius);
+        &inflated
+    };
     let reach = (radius / map.resolution()).ceil() as usize * 2 + 2;
     let free = |p: [f64; 2]| nearest_free(map, map.cell_of(p)?, reach);
     robots
