@@ -116,6 +116,9 @@ pub struct DroneState {
     pub sticks: Option<[f32; 4]>,
     /// The filter's pose (x, y, z, yaw), if valid.
     pub pose: Option<[f64; 4]>,
+    /// The horizontal standard deviation of `pose`, metres (absent from older logs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pose_sigma_m: Option<f64>,
     /// The filter's roll and pitch, radians (what the SLAM checked registrations against;
     /// absent from older logs).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -180,6 +183,8 @@ pub enum Record {
         sticks: Option<Sticks>,
         /// The filter's pose.
         pose: Option<[f64; 4]>,
+        /// Its horizontal standard deviation, metres.
+        pose_sigma_m: Option<f64>,
         /// The filter's roll and pitch.
         tilt: Option<[f64; 2]>,
         /// Its phase.
@@ -635,6 +640,7 @@ fn write_record(w: &mut McapWriter, ch: &mut Channels, r: &Record) -> Result<u64
             telemetry,
             sticks,
             pose,
+            pose_sigma_m,
             tilt,
             phase,
         } => {
@@ -652,6 +658,7 @@ fn write_record(w: &mut McapWriter, ch: &mut Channels, r: &Record) -> Result<u64
                 mode: telemetry.mode.clone(),
                 sticks: sticks.map(|s| [s.roll, s.pitch, s.yaw, s.throttle]),
                 pose: *pose,
+                pose_sigma_m: *pose_sigma_m,
                 tilt: *tilt,
             };
             let c = ch.json(w, &format!("/drone{k}/state"), "gcs.DroneState")?;
@@ -913,14 +920,15 @@ mod tests {
     }
 
     #[test]
-    fn drone_states_carry_the_filters_tilt_and_older_ones_read_without_it() {
+    fn drone_states_carry_the_filters_tilt_and_sigma_and_older_ones_read_without_them() {
         let older = r#"{"t":1.5,"phase":"exploring","height_m":0.9,"yaw_rad":0.1,
             "attitude":[0.01,0.02,0.1],"battery_v":12.1,"battery_pct":80,"armed":true,
             "mode":"ALT_HOLD","sticks":[0,0,0,0],"pose":[1,2,0.9,0.1]}"#;
         let s: DroneState = serde_json::from_str(older).expect("an older state");
-        assert_eq!((s.t, s.tilt), (1.5, None));
+        assert_eq!((s.t, s.tilt, s.pose_sigma_m), (1.5, None, None));
         let now = DroneState {
             tilt: Some([0.03, -0.04]),
+            pose_sigma_m: Some(0.04),
             ..s
         };
         let json = serde_json::to_string(&now).expect("json");

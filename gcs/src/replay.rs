@@ -352,6 +352,7 @@ fn sensor_sample(s: &DroneState) -> SensorSample {
         height: s.height_m.map(f64::from),
         tilt: s.tilt,
         body: s.pose,
+        body_sigma_m: s.pose_sigma_m,
     }
 }
 

@@ -180,6 +180,7 @@ fn run_dataset(args: &RunArgs) -> anyhow::Result<()> {
             height: None,
             tilt: None,
             predicted_body: None,
+            predicted_sigma_m: None,
             known_camera_pose: None,
         })?;
         slam_s += t.elapsed().as_secs_f64();

@@ -117,6 +117,20 @@ pub struct SlamConfig {
     /// Guided matching while relocalising searches this far around a point's predicted
     /// position, pixels (the prediction is poorer than while tracking).
     pub relocalisation_search_px: f32,
+    /// While lost, a relocalisation further from the prediction than this (metres, radians)
+    /// is a wrong match…
+    pub relocalisation_gate: (f64, f64),
+    /// …as is one further than the robot can have gone from the prediction since it was last
+    /// placed, at this speed (m/s; a lost drone holds its place: those found again after 10 s
+    /// blind in SITL had drifted under 1 m)…
+    pub relocalisation_drift_mps: f64,
+    /// …or, for a prediction whose uncertainty is known ([`Frame::predicted_sigma_m`]), further
+    /// than this many of its standard deviations…
+    pub relocalisation_gate_sigmas: f64,
+    /// …but the gate is never narrower than this, metres. In SITL a match 0.7 m along a wall of
+    /// repeated texture, taken 0.3 s after a drone was lost, put its pose there for the rest of
+    /// the mission, and it pressed into the wall ten times.
+    pub relocalisation_gate_min_m: f64,
     /// While lost, consecutive frames at most this far apart (seconds) are registered on each
     /// other for [`Odometry`]…
     pub odometry_max_gap: f64,
@@ -198,6 +212,10 @@ impl Default for SlamConfig {
             relocalisation_min_inliers: 25,
             relocalisation_min_inliers_unpredicted: 60,
             relocalisation_search_px: 60.0,
+            relocalisation_gate: (1.0, 0.6),
+            relocalisation_drift_mps: 0.3,
+            relocalisation_gate_sigmas: 3.0,
+            relocalisation_gate_min_m: 0.3,
             odometry_max_gap: 0.5,
             odometry_min_inliers: 15,
             link_sigma: (0.01, 0.5f64.to_radians()),
@@ -268,6 +286,9 @@ pub struct Frame {
     /// A prediction of the body's pose in the robot's frame (e.g. from an EKF), used to
     /// relocalise when tracking was lost.
     pub predicted_body: Option<Isometry3<f64>>,
+    /// The horizontal standard deviation of `predicted_body`, metres, if known: a
+    /// relocalisation far beyond it is refused ([`SlamConfig::relocalisation_gate_sigmas`]).
+    pub predicted_sigma_m: Option<f64>,
     /// The camera's pose known from elsewhere (used, and required, in mapping-only mode:
     /// [`SlamConfig::known_poses`]).
     pub known_camera_pose: Option<Isometry3<f64>>,
@@ -1109,6 +1130,30 @@ impl Slam {
             .then(|| format!("tilted {:.0}° from the IMU's gravity", angle.to_degrees()))
     }
 
+    /// How far (metres, radians) from the prediction a lost robot may be relocalised: within
+    /// [`SlamConfig::relocalisation_gate`], narrowed to how far it can have gone since it was
+    /// last placed and to the prediction's own uncertainty.
+    fn relocalisation_gate(&self, frame: &Frame) -> (f64, f64) {
+        let c = &self.config;
+        let (max_t, max_r) = c.relocalisation_gate;
+        let since_placed = self.robots[frame.robot]
+            .track
+            .last()
+            .map(|&(placed, _, _)| {
+                c.relocalisation_gate_min_m
+                    + c.relocalisation_drift_mps * (frame.stamp - placed).max(0.0)
+            });
+        let unsure = frame
+            .predicted_sigma_m
+            .filter(|s| s.is_finite() && frame.predicted_body.is_some())
+            .map(|sigma| c.relocalisation_gate_sigmas * sigma);
+        let reach = [since_placed, unsure]
+            .into_iter()
+            .flatten()
+            .fold(max_t, f64::min);
+        (reach.max(c.relocalisation_gate_min_m), max_r)
+    }
+
     fn track(&mut self, frame: &Frame, observation: Arc<Observation>) -> FrameReport {
         let k = frame.robot;
         let r = &self.robots[k];
@@ -1240,7 +1285,7 @@ impl Slam {
                                 self.config.max_frame_rotation,
                             )
                         } else {
-                            (1.0, 0.6)
+                            self.relocalisation_gate(frame)
                         };
                         let near_prediction = predicted.is_none_or(|p| {
                             let d = p.inverse() * pose;
@@ -2258,6 +2303,7 @@ mod tests {
             height: None,
             tilt: Some([0.0, 0.0]),
             predicted_body: None,
+            predicted_sigma_m: None,
             known_camera_pose: None,
         };
         let observation = Arc::new(Observation {
@@ -2438,6 +2484,56 @@ mod tests {
         // Off, there is no local map.
         slam.config.local_map_keyframes = 0;
         assert!(slam.local_map(0, &f).is_none());
+    }
+
+    #[test]
+    fn a_lost_robot_is_relocalised_no_further_than_it_can_have_gone() {
+        let mut slam = Slam::new(
+            SlamConfig::default(),
+            vec![RobotSetup {
+                body_from_camera: Isometry3::identity(),
+                start: None,
+            }],
+        );
+        // Last placed at 10 s.
+        slam.robots[0].track.push((10.0, 0, Isometry3::identity()));
+        let frame = |stamp: f64, sigma: Option<f64>| Frame {
+            robot: 0,
+            stamp,
+            grey: image::GrayImage::new(1, 1),
+            depth: vec![0],
+            depth_scale: 0.001,
+            camera: crate::dataset::Pinhole::TUM_FR1,
+            heading: Some(0.0),
+            heading_steady: false,
+            height: None,
+            tilt: None,
+            predicted_body: sigma.map(|_| Isometry3::identity()),
+            predicted_sigma_m: sigma,
+            known_camera_pose: None,
+        };
+        let gate = |slam: &Slam, stamp, sigma| slam.relocalisation_gate(&frame(stamp, sigma)).0;
+        let near = |a: f64, b: f64| (a - b).abs() < 1e-9;
+        // Where it was last placed: as far as 0.3 m/s takes it since, on top of 0.3 m, at most
+        // 1 m.
+        assert!(near(gate(&slam, 10.5, None), 0.45));
+        assert!(near(gate(&slam, 11.0, None), 0.6));
+        assert!(near(gate(&slam, 20.0, None), 1.0));
+        // The filter's prediction: no more than three of its standard deviations either, but
+        // never under 0.3 m.
+        assert!(near(gate(&slam, 11.0, Some(0.1)), 0.3));
+        assert!(near(gate(&slam, 11.0, Some(0.15)), 0.45));
+        assert!(near(gate(&slam, 11.0, Some(0.3)), 0.6));
+        assert!(near(gate(&slam, 20.0, Some(0.5)), 1.0));
+        // Never placed: the widest gate, or what the prediction's uncertainty allows.
+        slam.robots[0].track.clear();
+        assert!(near(gate(&slam, 10.3, None), 1.0));
+        assert!(near(gate(&slam, 10.3, Some(0.2)), 0.6));
+        // The rotation gate stays.
+        assert!(near(
+            slam.relocalisation_gate(&frame(10.3, Some(0.05))).1,
+            0.6
+        ));
     }
 
     #[test]

@@ -34,6 +34,10 @@ struct Flight {
     /// Give every frame the true body pose as the vehicle's prediction, this far (metres) off
     /// in height; `None`: no prediction (a hand-held camera).
     predicted_height_error: Option<f64>,
+    /// … this far off along the map's x axis, metres…
+    predicted_x_error: f64,
+    /// … and known to this standard deviation, metres (`None`: not said).
+    predicted_sigma: Option<f64>,
     /// Why frames were lost.
     lost_why: Vec<String>,
     /// Give every frame its true camera pose (mapping with known poses).
@@ -92,6 +96,8 @@ impl Flight {
             weak: vec![0; drones],
             tracked: vec![0; drones],
             predicted_height_error: None,
+            predicted_x_error: 0.0,
+            predicted_sigma: None,
             lost_why: vec![],
             known_poses: false,
             heading_bias: Some(0.0),
@@ -175,10 +181,15 @@ impl Flight {
                     predicted_body: self.predicted_height_error.map(|dz| {
                         let s = self.sim.vehicle(k).state();
                         Isometry3::new(
-                            Vector3::new(s.position[0], s.position[1], s.position[2] + dz),
+                            Vector3::new(
+                                s.position[0] + self.predicted_x_error,
+                                s.position[1],
+                                s.position[2] + dz,
+                            ),
                             Vector3::z() * s.yaw,
                         )
                     }),
+                    predicted_sigma_m: self.predicted_sigma,
                     known_camera_pose: self.known_poses.then_some(f.map_from_camera),
                 })
                 .expect("frame");
@@ -422,6 +433,59 @@ fn a_vehicle_lost_with_no_prediction_relocalises_only_on_a_strong_match() {
 }
 
 #[test]
+fn a_lost_vehicle_is_relocalised_only_as_far_from_its_prediction_as_the_prediction_is_unsure() {
+    // Half a turn, the camera blind for two seconds (tracking lost), then the turn back, the
+    // vehicle's filter predicting the body `x_error` metres off along x and saying it is sure
+    // to `sigma`. A sure prediction that far off cannot be where a match puts the vehicle, so
+    // no match is taken (in SITL a wrong one, 0.7 m along a bare wall, was taken 0.3 s after a
+    // drone was lost, and it flew on it into the wall); an unsure one can, and the match is
+    // where the vehicle is, not where the prediction said.
+    let run = |x_error: f64, sigma: f64| {
+        let mut f = Flight::new(1, &[true], SlamConfig::default());
+        f.predicted_height_error = Some(0.0);
+        f.predicted_sigma = Some(sigma);
+        let (x, y, yaw) = start_of(&f, 0);
+        let route = turn(x, y, 1.0, yaw);
+        f.fly(&[route[..5].to_vec()], 30.0);
+        f.blind = true;
+        f.hold(&[route[4]], 2.0);
+        let (lost_blind, frames_blind) = (f.lost[0], f.frames[0]);
+        assert!(lost_blind > 0, "the blind camera loses tracking");
+        f.blind = false;
+        f.predicted_x_error = x_error;
+        let back: Vec<Waypoint> = route[..5].iter().rev().copied().collect();
+        f.fly(&[back], 30.0);
+        let (lost, frames) = (f.lost[0] - lost_blind, f.frames[0] - frames_blind);
+        eprintln!("{x_error} m off, sure to {sigma} m: {lost} of {frames} frames lost");
+        (lost, frames, f)
+    };
+    let (lost, frames, _) = run(0.0, 0.05);
+    assert!(
+        lost * 4 < frames,
+        "{lost} of {frames} lost on a right prediction"
+    );
+    let (lost, frames, f) = run(0.6, 0.05);
+    assert_eq!(
+        lost, frames,
+        "relocalised 0.6 m from a prediction sure to 5 cm"
+    );
+    assert!(
+        f.lost_why
+            .iter()
+            .any(|w| w.contains("far from the prediction")),
+        "{:?}",
+        &f.lost_why[f.lost_why.len().saturating_sub(3)..]
+    );
+    let (lost, frames, f) = run(0.6, 0.3);
+    assert!(
+        lost * 4 < frames,
+        "{lost} of {frames} lost on an unsure prediction"
+    );
+    let ate = f.ate(0, None);
+    assert!(ate < 0.05, "ATE {ate:.3} m: placed where the match says");
+}
+
+#[test]
 fn mapping_with_known_poses_adds_no_keyframes_where_one_already_holds_the_view() {
     // A drone turns on the spot, then twice more: the later turns see what the first one's
     // keyframes already hold, so the SLAM's memory stops growing (an hour of exploration flies
@@ -655,6 +719,7 @@ fn a_camera_on_the_real_fr1_xyz_motion_is_tracked_to_within_two_centimetres() {
                 height: None,
                 tilt: None,
                 predicted_body: None,
+                predicted_sigma_m: None,
                 known_camera_pose: None,
             })
             .expect("frame");

@@ -749,6 +749,11 @@ impl Drone {
             .map(|e| [e.position[0], e.position[1], e.position[2], e.attitude[2]])
     }
 
+    /// The horizontal standard deviation of [`Drone::pose`], metres, while it is valid.
+    pub fn pose_sigma_m(&self) -> Option<f64> {
+        self.ekf.valid_estimate().map(|e| e.position_sigma)
+    }
+
     /// Where the mission planner plans this drone from (x, y): its position estimate while it
     /// is known within `config.plan_position_sigma_m`, which a pose too uncertain to fly on
     /// may still be.

@@ -692,6 +692,7 @@ impl Mission {
                     height: t.height_m.map(f64::from),
                     tilt: Some(d.tilt()),
                     body: d.pose(),
+                    body_sigma_m: d.pose_sigma_m(),
                 },
             );
             if let Some(r) = &self.recorder {
@@ -701,6 +702,7 @@ impl Mission {
                     telemetry: t,
                     sticks: d.sticks,
                     pose: d.pose(),
+                    pose_sigma_m: d.pose_sigma_m(),
                     tilt: Some(d.tilt()),
                     phase: d.phase.name(),
                 });

@@ -50,6 +50,9 @@ pub struct SensorSample {
     pub tilt: Option<[f64; 2]>,
     /// The filter's body pose (x, y, z, yaw), if valid.
     pub body: Option<[f64; 4]>,
+    /// The horizontal standard deviation of `body`, metres (absent from older logs): the SLAM
+    /// relocalises a lost drone no further from `body` than this allows.
+    pub body_sigma_m: Option<f64>,
 }
 
 /// What the SLAM takes from a vehicle's samples at a camera frame's time ([`sensors_at`]).
@@ -461,6 +464,7 @@ pub fn slam_frame(f: &CameraFrame, sensors: Option<FrameSensors>, known: bool) -
         height: sample.and_then(|s| s.height),
         tilt: sample.and_then(|s| s.tilt),
         predicted_body: predicted,
+        predicted_sigma_m: sample.and_then(|s| s.body_sigma_m),
         known_camera_pose: f.truth.filter(|_| known),
     })
 }
@@ -477,7 +481,45 @@ mod tests {
             height: Some(0.9),
             tilt: None,
             body: None,
+            body_sigma_m: None,
         }
+    }
+
+    #[test]
+    fn a_frame_tells_the_slam_where_the_filter_has_the_drone_and_how_sure_it_is() {
+        let (width, height) = (4, 3);
+        let f = CameraFrame {
+            drone: 1,
+            stamp: 2.0,
+            frame: Arc::new(RgbdFrame {
+                vehicle: 2,
+                stamp: Duration::from_secs(2),
+                width,
+                height,
+                intrinsics: link::camera::Intrinsics::kinect(width, height),
+                rgb: vec![0; 36],
+                depth_mm: vec![1000; 12],
+            }),
+            truth: None,
+        };
+        let mut s = sample(2.0, 0.5);
+        s.body = Some([1.0, 2.0, 0.9, 0.5]);
+        s.body_sigma_m = Some(0.04);
+        let sensors = |sample| FrameSensors {
+            sample,
+            heading_steady: true,
+        };
+        let frame = slam_frame(&f, Some(sensors(s)), false).expect("a frame");
+        let p = frame.predicted_body.expect("the filter's pose");
+        assert!((p.translation.vector - nalgebra::Vector3::new(1.0, 2.0, 0.9)).norm() < 1e-12);
+        assert!((p.rotation.euler_angles().2 - 0.5).abs() < 1e-12);
+        assert_eq!(frame.predicted_sigma_m, Some(0.04));
+        // No valid pose: nothing predicted, nothing to be sure of.
+        let frame = slam_frame(&f, Some(sensors(sample(2.0, 0.5))), false).expect("a frame");
+        assert_eq!(
+            (frame.predicted_body, frame.predicted_sigma_m),
+            (None, None)
+        );
     }
 
     #[test]
