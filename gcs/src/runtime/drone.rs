@@ -804,7 +804,22 @@ impl Drone {
         inliers: Option<usize>,
         keyframe: bool,
     ) {
+        let before = self.ekf.estimate().position;
         let update = self.ekf.update_slam_on(stamp, position, yaw, inliers);
+        let after = self.ekf.estimate().position;
+        let moved = (after[0] - before[0]).hypot(after[1] - before[1]);
+        if update == Update::Corrected || moved > 0.2 {
+            // Where a drone's estimate jumps (a map correction, or a fix far off taken anyway).
+            tracing::debug!(
+                drone = self.id + 1,
+                stamp,
+                ?update,
+                ?inliers,
+                fix = ?position,
+                moved_m = moved,
+                "SLAM fix moved the estimate"
+            );
+        }
         let used = matches!(update, Update::Applied | Update::Corrected);
         if !used {
             let e = self.ekf.estimate();

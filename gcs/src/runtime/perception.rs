@@ -391,8 +391,12 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
         if times.len() > 100 {
             times.pop_front();
         }
-        if let Tracking::Lost(why) = &report.tracking {
-            tracing::debug!(drone = k + 1, "tracking lost: {why}");
+        match &report.tracking {
+            Tracking::Lost(why) => tracing::debug!(drone = k + 1, "tracking lost: {why}"),
+            Tracking::Relocalised { keyframe } => {
+                tracing::debug!(drone = k + 1, stamp = f.stamp, keyframe, "relocalised");
+            }
+            _ => {}
         }
         if let Some(t) = f.truth {
             truth[k].push(Stamped {
