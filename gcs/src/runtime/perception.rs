@@ -396,6 +396,9 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
             Tracking::Relocalised { keyframe } => {
                 tracing::debug!(drone = k + 1, stamp = f.stamp, keyframe, "relocalised");
             }
+            Tracking::Weak { inliers } => {
+                tracing::debug!(drone = k + 1, stamp = f.stamp, inliers, "weak registration");
+            }
             _ => {}
         }
         if let Some(t) = f.truth {
