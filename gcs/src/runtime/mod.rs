@@ -683,6 +683,7 @@ impl Mission {
             let event = self.drones[k].tick(now, &self.config.drone);
             let d = &self.drones[k];
             let t = d.link.telemetry();
+            let (pose, pose_sigma_m, tilt) = (d.pose(), d.pose_sigma_m(), Some(d.tilt()));
             self.sensors.push(
                 k,
                 SensorSample {
@@ -690,9 +691,9 @@ impl Mission {
                     heading: t.yaw_rad.map(f64::from),
                     heading_t: t.heading_time(now),
                     height: t.height_m.map(f64::from),
-                    tilt: Some(d.tilt()),
-                    body: d.pose(),
-                    body_sigma_m: d.pose_sigma_m(),
+                    tilt,
+                    body: pose,
+                    body_sigma_m: pose_sigma_m,
                 },
             );
             if let Some(r) = &self.recorder {
@@ -701,9 +702,9 @@ impl Mission {
                     drone: k,
                     telemetry: t,
                     sticks: d.sticks,
-                    pose: d.pose(),
-                    pose_sigma_m: d.pose_sigma_m(),
-                    tilt: Some(d.tilt()),
+                    pose,
+                    pose_sigma_m,
+                    tilt,
                     phase: d.phase.name(),
                 });
             }
