@@ -177,6 +177,7 @@ fn run_dataset(args: &RunArgs) -> anyhow::Result<()> {
             camera: ds.camera,
             heading: None,
             heading_steady: false,
+            turning_heading: None,
             height: None,
             tilt: None,
             predicted_body: None,

@@ -278,6 +278,12 @@ pub struct Frame {
     /// keyframes taken mostly while turning, biased the map's yaw; relocalisation and the
     /// loop-closure check use any heading.
     pub heading_steady: bool,
+    /// The IMU heading read while the body turned too fast for `heading` (`heading` is then
+    /// `None`): it lags the camera by a few degrees, too much to check loop closures with, but
+    /// a lost robot is still looked for facing this way (the relocalisation gate allows 0.6
+    /// rad). Without it, a drone lost during a turn could be found only by a match strong
+    /// enough to need no prediction ([`SlamConfig::relocalisation_min_inliers_unpredicted`]).
+    pub turning_heading: Option<f64>,
     /// The body's height above the floor from its rangefinder, metres, if it has one.
     pub height: Option<f64>,
     /// The body's roll and pitch (FLU, radians: right side down, nose down) from its IMU or
@@ -535,6 +541,10 @@ struct Robot {
     /// The reference keyframe and the camera relative to it (the last known pose while lost).
     reference: Option<usize>,
     reference_from_camera: Isometry3<f64>,
+    /// After weak registrations ([`Tracking::Weak`]), the camera relative to the reference
+    /// keyframe where the motion before them carries it: the next frame is predicted, matched
+    /// and checked from here, not from the weak pose (`None`: from `reference_from_camera`).
+    carried_from_camera: Option<Isometry3<f64>>,
     previous: Option<Previous>,
     /// Previous camera from current camera, for the constant-velocity prediction.
     velocity: Option<Isometry3<f64>>,
@@ -736,6 +746,7 @@ impl Slam {
                     state: RobotState::Waiting,
                     reference: None,
                     reference_from_camera: Isometry3::identity(),
+                    carried_from_camera: None,
                     previous: None,
                     velocity: None,
                     nodes: vec![],
@@ -912,7 +923,7 @@ impl Slam {
         let robot = &mut self.robots[k];
         robot.frames += 1;
         robot.stamp = frame.stamp;
-        robot.has_imu |= frame.heading.is_some();
+        robot.has_imu |= frame.heading.or(frame.turning_heading).is_some();
         let mut report = if robot.reference.is_none() {
             self.start(&frame, observation.clone())
         } else {
@@ -931,6 +942,7 @@ impl Slam {
             };
             r.previous = None;
             r.velocity = None;
+            r.carried_from_camera = None;
         } else if let Some(n) = self.robots[k].reference {
             let r = &mut self.robots[k];
             r.lost_last = None;
@@ -1161,19 +1173,21 @@ impl Slam {
             return lost("no reference keyframe".into());
         };
         let tracking = r.state == RobotState::Tracking;
-        let last_pose = self.nodes[reference].pose * r.reference_from_camera;
+        let last_pose =
+            self.nodes[reference].pose * r.carried_from_camera.unwrap_or(r.reference_from_camera);
         let camera_from_body = r.setup.body_from_camera.inverse();
         let predicted = if tracking {
             Some(r.velocity.map_or(last_pose, |v| last_pose * v))
         } else {
             // Lost: the caller's prediction, else where the robot was last seen, turned to the
-            // heading its IMU reads now (a hovering robot turns more than it moves).
+            // heading its IMU reads now, turning or not (a hovering robot turns more than it
+            // moves).
             let body_from_camera = r.setup.body_from_camera;
             frame
                 .predicted_body
                 .map(|b| b * body_from_camera)
                 .or_else(|| {
-                    frame.heading.map(|psi| {
+                    frame.heading.or(frame.turning_heading).map(|psi| {
                         let turn = wrap(psi - body_yaw(&last_pose, &camera_from_body));
                         let about_z = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), turn);
                         Isometry3::from_parts(last_pose.translation, about_z * last_pose.rotation)
@@ -1335,7 +1349,10 @@ impl Slam {
         // keyframe, nor the motion the next frame is predicted with (a fit on a dozen inliers
         // can be degrees off, and a keyframe would keep that error in the map for good). One
         // that agrees carries tracking through a bare stretch. A hand-held camera moves in jerks
-        // that no constant-velocity model follows; there every registration is built on.
+        // that no constant-velocity model follows; there every registration is built on. Nor is
+        // the next frame predicted from a weak pose: it is matched and checked from where the
+        // motion before carries the camera (runs of weak registrations walk, and a strong match
+        // near a walked-off guess passes every per-frame check).
         let (max_t, max_r) = self.config.weak_agreement;
         let weak = frame.predicted_body.is_some()
             && reg.inliers < self.config.keyframe_min_inliers
@@ -1350,6 +1367,9 @@ impl Slam {
         r.state = RobotState::Tracking;
         r.reference = Some(anchor);
         r.reference_from_camera = anchor_from_camera;
+        r.carried_from_camera = weak
+            .then(|| predicted.map(|p| self.nodes[anchor].pose.inverse() * p))
+            .flatten();
         if !weak {
             r.previous = Some(Previous {
                 observation: observation.clone(),
@@ -2292,19 +2312,8 @@ mod tests {
             }],
         );
         let frame = Frame {
-            robot: 0,
-            stamp: 0.0,
-            grey: image::GrayImage::new(1, 1),
-            depth: vec![0],
-            depth_scale: 0.001,
-            camera: crate::dataset::Pinhole::TUM_FR1,
-            heading: None,
-            heading_steady: false,
-            height: None,
             tilt: Some([0.0, 0.0]),
-            predicted_body: None,
-            predicted_sigma_m: None,
-            known_camera_pose: None,
+            ..bare_frame(0.0)
         };
         let observation = Arc::new(Observation {
             keypoints: vec![],
@@ -2367,6 +2376,54 @@ mod tests {
                 .wrapping_add(1_442_695_040_888_963_407);
             seed
         }
+    }
+
+    /// A frame of robot 0 at `stamp` with nothing measured: the tests that call the tracker
+    /// directly give it what they need (its observation comes separately).
+    fn bare_frame(stamp: f64) -> Frame {
+        Frame {
+            robot: 0,
+            stamp,
+            grey: image::GrayImage::new(1, 1),
+            depth: vec![0],
+            depth_scale: 0.001,
+            camera: crate::dataset::Pinhole::TUM_FR1,
+            heading: None,
+            heading_steady: false,
+            turning_heading: None,
+            height: None,
+            tilt: None,
+            predicted_body: None,
+            predicted_sigma_m: None,
+            known_camera_pose: None,
+        }
+    }
+
+    /// A vehicle's camera 10 cm ahead of and 5 cm above its body's centre, looking along the
+    /// body's x (optical z forward, x right, y down).
+    fn forward_camera() -> Isometry3<f64> {
+        Isometry3::from_parts(
+            Translation3::new(0.1, 0.0, 0.05),
+            UnitQuaternion::from_matrix(&nalgebra::Matrix3::new(
+                0.0, 0.0, 1.0, //
+                -1.0, 0.0, 0.0, //
+                0.0, -1.0, 0.0,
+            )),
+        )
+    }
+
+    /// `n` textured points (rows of ten) on a wall 2–2.3 m ahead along x, from 1 m left to
+    /// 0.8 m right, from 0.3 m up, each with a random descriptor drawn from `bits`.
+    fn textured_wall(n: u32, bits: &mut impl FnMut() -> u64) -> Vec<(Point3<f64>, Descriptor)> {
+        (0..n)
+            .map(|i| {
+                let (row, col) = (f64::from(i / 10), f64::from(i % 10));
+                (
+                    Point3::new(2.0 + 0.1 * (col % 4.0), 1.0 - 0.2 * col, 0.3 + 0.15 * row),
+                    [bits(), bits(), bits(), bits()],
+                )
+            })
+            .collect()
     }
 
     /// What a camera at `map_from_camera` sees of `scene` (map points with their
@@ -2498,19 +2555,10 @@ mod tests {
         // Last placed at 10 s.
         slam.robots[0].track.push((10.0, 0, Isometry3::identity()));
         let frame = |stamp: f64, sigma: Option<f64>| Frame {
-            robot: 0,
-            stamp,
-            grey: image::GrayImage::new(1, 1),
-            depth: vec![0],
-            depth_scale: 0.001,
-            camera: crate::dataset::Pinhole::TUM_FR1,
             heading: Some(0.0),
-            heading_steady: false,
-            height: None,
-            tilt: None,
             predicted_body: sigma.map(|_| Isometry3::identity()),
             predicted_sigma_m: sigma,
-            known_camera_pose: None,
+            ..bare_frame(stamp)
         };
         let gate = |slam: &Slam, stamp, sigma| slam.relocalisation_gate(&frame(stamp, sigma)).0;
         let near = |a: f64, b: f64| (a - b).abs() < 1e-9;
@@ -2537,28 +2585,140 @@ mod tests {
     }
 
     #[test]
+    fn weak_registrations_do_not_walk_the_pose_the_next_frame_is_predicted_from() {
+        // A vehicle's camera facing a textured wall 2–3 m ahead, its body sliding 4 cm a frame
+        // along it, its filter predicting each pose. Every registration counts as one on too few
+        // inliers for a keyframe, and from rest every move strays from the motion so far: each
+        // frame is weak. It keeps its pose, but the next frame is predicted (and matched and
+        // checked) from where the motion before carried the camera, the start; not from the
+        // weak pose, which a run of wrong weak registrations would walk off with. A strong
+        // registration is built on again.
+        let wall = textured_wall(80, &mut random_bits(7));
+        let body_from_camera = forward_camera();
+        let start = Isometry3::new(Vector3::new(0.0, 0.0, 0.9), Vector3::zeros());
+        let mut slam = Slam::new(
+            SlamConfig {
+                keyframe_min_inliers: usize::MAX,
+                ..SlamConfig::default()
+            },
+            vec![RobotSetup {
+                body_from_camera,
+                start: Some(start),
+            }],
+        );
+        // Frame `i`: the body 4 cm further left each frame, and what its camera sees.
+        let at = |i: u32| start * Translation3::new(0.0, 0.04 * f64::from(i), 0.0);
+        let frame = |i: u32| Frame {
+            heading: Some(0.0),
+            predicted_body: Some(at(i)),
+            predicted_sigma_m: Some(0.05),
+            ..bare_frame(0.1 * f64::from(i))
+        };
+        let view = |i: u32| Arc::new(seen(&wall, &(at(i) * body_from_camera)));
+        let body_off = |slam: &Slam, i: u32| {
+            let e = slam.estimate(0).unwrap().frame_from_body.unwrap();
+            (at(i).inverse() * e).translation.vector.norm()
+        };
+        let predicted_from = |slam: &Slam| {
+            let r = &slam.robots[0];
+            let camera = slam.nodes[r.reference.unwrap()].pose
+                * r.carried_from_camera.unwrap_or(r.reference_from_camera);
+            camera * body_from_camera.inverse()
+        };
+        assert_eq!(slam.start(&frame(0), view(0)).tracking, Tracking::Started);
+        for i in 1..=3 {
+            let report = slam.track(&frame(i), view(i));
+            assert!(
+                matches!(report.tracking, Tracking::Weak { .. }),
+                "frame {i}: {:?}",
+                report.tracking
+            );
+            // The frame keeps its (right) pose…
+            assert!(
+                body_off(&slam, i) < 0.005,
+                "frame {i}: {}",
+                body_off(&slam, i)
+            );
+            // …but the next is predicted from the start (the motion so far: none).
+            let off = (start.inverse() * predicted_from(&slam))
+                .translation
+                .vector
+                .norm();
+            assert!(
+                off < 1e-9,
+                "frame {i}: predicted from {off} m off the start"
+            );
+        }
+        // A registration on enough inliers is built on: the next frame is predicted from it.
+        slam.config.keyframe_min_inliers = 25;
+        let report = slam.track(&frame(4), view(4));
+        assert!(
+            matches!(report.tracking, Tracking::Tracked { .. }),
+            "{:?}",
+            report.tracking
+        );
+        let off = (at(4).inverse() * predicted_from(&slam))
+            .translation
+            .vector
+            .norm();
+        assert!(off < 0.005, "predicted from {off} m off frame 4");
+    }
+
+    #[test]
+    fn a_robot_lost_while_turning_is_looked_for_facing_its_turning_heading() {
+        // A vehicle's camera facing a textured wall; its filter has no pose to predict with,
+        // and the SLAM has lost it. It hovers, turning fast (its heading comes only as a
+        // turning one). The wall gives a match on fewer inliers than a match with nothing to
+        // check it against needs: refused without the turning heading, taken with it.
+        let wall = textured_wall(50, &mut random_bits(3));
+        let body_from_camera = forward_camera();
+        let start = Isometry3::new(Vector3::new(0.0, 0.0, 0.9), Vector3::zeros());
+        let now = start * Isometry3::new(Vector3::new(0.03, 0.02, 0.0), Vector3::z() * 0.1);
+        let view = |body: &Isometry3<f64>| Arc::new(seen(&wall, &(body * body_from_camera)));
+        let run = |turning_heading: Option<f64>| {
+            let mut slam = Slam::new(
+                SlamConfig::default(),
+                vec![RobotSetup {
+                    body_from_camera,
+                    start: Some(start),
+                }],
+            );
+            let first = Frame {
+                heading: Some(0.0),
+                ..bare_frame(0.0)
+            };
+            assert_eq!(slam.start(&first, view(&start)).tracking, Tracking::Started);
+            // What `process` does with a frame with a heading, and with a lost one.
+            slam.robots[0].has_imu = true;
+            slam.robots[0].track.push((0.0, 0, Isometry3::identity()));
+            slam.robots[0].state = RobotState::Lost;
+            let turning = Frame {
+                turning_heading,
+                ..bare_frame(0.5)
+            };
+            let report = slam.track(&turning, view(&now));
+            (report, slam.estimate(0).and_then(|e| e.frame_from_body))
+        };
+        let inliers = view(&now).len();
+        assert!(inliers < SlamConfig::default().relocalisation_min_inliers_unpredicted);
+        let Tracking::Lost(why) = run(None).0.tracking else {
+            panic!("found with nothing to check the match against");
+        };
+        assert!(why.contains("inliers"), "{why}");
+        let (found, body) = run(Some(0.1));
+        assert_eq!(found.tracking, Tracking::Relocalised { keyframe: 0 });
+        let off = now.inverse() * body.expect("a pose");
+        assert!(off.translation.vector.norm() < 0.005, "{off}");
+    }
+
+    #[test]
     fn a_lost_robot_measures_its_motion_between_consecutive_frames() {
         // A vehicle's camera looking along its body's x at a textured wall 2–3 m ahead; it is
         // lost (the map cannot place it). Between two frames 0.1 s apart its body moved 4 cm
         // forward and 3 cm left and turned 3° anticlockwise.
         let mut bits = random_bits(11);
-        let body_from_camera = Isometry3::from_parts(
-            Translation3::new(0.1, 0.0, 0.05),
-            UnitQuaternion::from_matrix(&nalgebra::Matrix3::new(
-                0.0, 0.0, 1.0, //
-                -1.0, 0.0, 0.0, //
-                0.0, -1.0, 0.0,
-            )),
-        );
-        let wall: Vec<(Point3<f64>, Descriptor)> = (0..80)
-            .map(|i| {
-                let (row, col) = (f64::from(i / 10), f64::from(i % 10));
-                (
-                    Point3::new(2.0 + 0.1 * (col % 4.0), 1.0 - 0.2 * col, 0.3 + 0.15 * row),
-                    [bits(), bits(), bits(), bits()],
-                )
-            })
-            .collect();
+        let body_from_camera = forward_camera();
+        let wall = textured_wall(80, &mut bits);
         let map_from_body_then = Isometry3::new(Vector3::new(0.0, 0.0, 0.9), Vector3::zeros());
         let then_from_now = Isometry3::new(Vector3::new(0.04, 0.03, 0.0), Vector3::z() * 0.05);
         let map_from_body_now = map_from_body_then * then_from_now;

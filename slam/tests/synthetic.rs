@@ -173,6 +173,7 @@ impl Flight {
                     },
                     heading: self.heading_bias.map(|b| readings.yaw + b),
                     heading_steady: self.heading_steady,
+                    turning_heading: None,
                     height: readings.sonar,
                     tilt: self.roll_bias.map(|b| {
                         let s = self.sim.vehicle(k).state();
@@ -716,6 +717,7 @@ fn a_camera_on_the_real_fr1_xyz_motion_is_tracked_to_within_two_centimetres() {
                 },
                 heading: None,
                 heading_steady: false,
+                turning_heading: None,
                 height: None,
                 tilt: None,
                 predicted_body: None,

@@ -64,6 +64,9 @@ pub struct FrameSensors {
     /// The heading was steady either side of the sample ([`heading_steady`]): fit to be a
     /// prior on the map.
     pub heading_steady: bool,
+    /// The heading left out of `sample` for turning, which still turns where the SLAM looks
+    /// for the drone when it is lost ([`slam::system::Frame::turning_heading`]).
+    pub turning_heading: Option<f64>,
 }
 
 /// The recent sensor samples of every drone (written by the control loop).
@@ -133,6 +136,7 @@ pub fn sensors_at(samples: &[SensorSample], t: f64) -> Option<FrameSensors> {
         return Some(FrameSensors {
             sample,
             heading_steady: false,
+            turning_heading: None,
         });
     };
     let (before, here, next) = (
@@ -148,6 +152,7 @@ pub fn sensors_at(samples: &[SensorSample], t: f64) -> Option<FrameSensors> {
     Some(FrameSensors {
         sample,
         heading_steady,
+        turning_heading: turning.then_some(here.1),
     })
 }
 
@@ -468,6 +473,7 @@ pub fn slam_frame(f: &CameraFrame, sensors: Option<FrameSensors>, known: bool) -
         },
         heading: sample.and_then(|s| s.heading),
         heading_steady: sensors.is_some_and(|s| s.heading_steady),
+        turning_heading: sensors.and_then(|s| s.turning_heading),
         height: sample.and_then(|s| s.height),
         tilt: sample.and_then(|s| s.tilt),
         predicted_body: predicted,
@@ -492,15 +498,15 @@ mod tests {
         }
     }
 
-    #[test]
-    fn a_frame_tells_the_slam_where_the_filter_has_the_drone_and_how_sure_it_is() {
+    /// A black 4 × 3 frame of drone index `drone` at `stamp` seconds, everything 1 m away.
+    fn camera_frame(drone: usize, stamp: u64) -> CameraFrame {
         let (width, height) = (4, 3);
-        let f = CameraFrame {
-            drone: 1,
-            stamp: 2.0,
+        CameraFrame {
+            drone,
+            stamp: stamp as f64,
             frame: Arc::new(RgbdFrame {
-                vehicle: 2,
-                stamp: Duration::from_secs(2),
+                vehicle: drone as u8 + 1,
+                stamp: Duration::from_secs(stamp),
                 width,
                 height,
                 intrinsics: link::camera::Intrinsics::kinect(width, height),
@@ -508,13 +514,19 @@ mod tests {
                 depth_mm: vec![1000; 12],
             }),
             truth: None,
-        };
+        }
+    }
+
+    #[test]
+    fn a_frame_tells_the_slam_where_the_filter_has_the_drone_and_how_sure_it_is() {
+        let f = camera_frame(1, 2);
         let mut s = sample(2.0, 0.5);
         s.body = Some([1.0, 2.0, 0.9, 0.5]);
         s.body_sigma_m = Some(0.04);
         let sensors = |sample| FrameSensors {
             sample,
             heading_steady: true,
+            turning_heading: None,
         };
         let frame = slam_frame(&f, Some(sensors(s)), false).expect("a frame");
         let p = frame.predicted_body.expect("the filter's pose");
@@ -574,25 +586,35 @@ mod tests {
     }
 
     #[test]
-    fn a_heading_taken_while_turning_fast_is_left_out() {
+    fn a_heading_taken_while_turning_fast_only_turns_where_a_lost_drone_is_looked_for() {
         let log = SensorLog::new(1);
         // A look-around: 36°/s, through ±180°.
+        let yaw = |t: f64| {
+            (3.0 + 0.628 * t + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+                - std::f64::consts::PI
+        };
         for i in 0..30 {
             let t = f64::from(i) * 0.1;
-            let yaw = (3.0 + 0.628 * t + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
-                - std::f64::consts::PI;
-            log.push(0, sample(t, yaw));
+            log.push(0, sample(t, yaw(t)));
         }
         for t in [0.0, 0.55, 1.0, 2.9] {
-            let s = log.at(0, t).expect("a sample").sample;
-            assert!(s.heading.is_none(), "t = {t}: {s:?}");
-            assert_eq!(s.height, Some(0.9), "the height stays");
+            let s = log.at(0, t).expect("a sample");
+            assert!(s.sample.heading.is_none(), "t = {t}: {s:?}");
+            assert_eq!(s.sample.height, Some(0.9), "the height stays");
+            // The heading that arrived nearest the frame, for the SLAM's relocalisation only.
+            let arrived = s.sample.heading_t;
+            assert!((t - arrived).abs() <= 0.05 + 1e-9, "t = {t}: {s:?}");
+            assert_eq!(s.turning_heading, Some(yaw(arrived)), "t = {t}: {s:?}");
         }
+        let f = slam_frame(&camera_frame(0, 1), log.at(0, 1.0), false).expect("a frame");
+        assert_eq!((f.heading, f.turning_heading), (None, Some(yaw(1.0))));
         // Then hovering, turning 2°/s: the heading goes to the SLAM again.
         for i in 30..40 {
             log.push(0, sample(f64::from(i) * 0.1, 1.0 + f64::from(i) * 0.0035));
         }
-        assert!(log.at(0, 3.5).and_then(|s| s.sample.heading).is_some());
+        let s = log.at(0, 3.5).expect("a sample");
+        assert!(s.sample.heading.is_some());
+        assert_eq!(s.turning_heading, None);
     }
 
     #[test]
