@@ -1301,19 +1301,25 @@ impl Slam {
                         } else {
                             self.relocalisation_gate(frame)
                         };
-                        let near_prediction = predicted.is_none_or(|p| {
+                        // How far from the prediction (metres, radians).
+                        let (off_t, off_r) = predicted.map_or((0.0, 0.0), |p| {
                             let d = p.inverse() * pose;
-                            d.translation.vector.norm() < max_t && d.rotation.angle() < max_r
+                            (d.translation.vector.norm(), d.rotation.angle())
                         });
                         match self.implausible(frame, &pose) {
-                            None if near_prediction => {
+                            None if off_t < max_t && off_r < max_r => {
                                 found = Some((Some(n), reg));
                                 relocalised = Some(n);
                                 break;
                             }
                             None => add_reason(
                                 &mut why,
-                                format!("keyframe {n}: far from the prediction"),
+                                format!(
+                                    "keyframe {n}: {off_t:.2} m, {:.0}° from the prediction \
+                                     (gate {max_t:.2} m, {:.0}°)",
+                                    off_r.to_degrees(),
+                                    max_r.to_degrees()
+                                ),
                             ),
                             Some(off) => add_reason(&mut why, format!("keyframe {n}: {off}")),
                         }

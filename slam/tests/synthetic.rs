@@ -473,7 +473,7 @@ fn a_lost_vehicle_is_relocalised_only_as_far_from_its_prediction_as_the_predicti
     assert!(
         f.lost_why
             .iter()
-            .any(|w| w.contains("far from the prediction")),
+            .any(|w| w.contains("from the prediction (gate 0.30 m")),
         "{:?}",
         &f.lost_why[f.lost_why.len().saturating_sub(3)..]
     );
