@@ -97,6 +97,10 @@ pub struct DroneSpec {
 /// runs for, seconds (two plans at 1 Hz).
 const GOAL_GAP_S: f64 = 2.5;
 
+/// A lost drone within this of its last keyframe's heading faces it, radians
+/// ([`DroneConfig::blind_face_s`]).
+pub const FACING_RAD: f64 = 0.1;
+
 /// Timing and behaviour settings of every drone.
 #[derive(Debug, Clone)]
 pub struct DroneConfig {
@@ -140,8 +144,13 @@ pub struct DroneConfig {
     /// range), else it stops where it was lost, metres.
     pub lost_back_m: f64,
     /// Lost by the SLAM, turn back to the heading of the last SLAM keyframe for this long
-    /// first, seconds.
+    /// first, seconds…
     pub blind_turn_back_s: f64,
+    /// …but no longer than this once it faces that heading (within [`FACING_RAD`]), seconds:
+    /// a view that has not found the map by then will not (in SITL, drones lost facing a bare
+    /// wall hovered before it for the whole turn back, drifting up to 0.9 m, out of where the
+    /// SLAM looks for them, before their sweep began).
+    pub blind_face_s: f64,
     /// Land after this long lost by the SLAM (on visual odometry, or blind), seconds.
     pub blind_land_s: f64,
     /// With no pose but a velocity visual odometry still measures, the drift is braked (as
@@ -213,6 +222,7 @@ impl Default for DroneConfig {
             blind_yaw: 0.2,
             lost_back_m: 1.0,
             blind_turn_back_s: 10.0,
+            blind_face_s: 2.0,
             blind_land_s: 30.0,
             blind_brake_gain: 0.5,
             blind_brake_max: 0.15,
@@ -352,6 +362,8 @@ pub struct Drone {
     /// The phase the link was lost in.
     lost_in: Option<Phase>,
     blind_since: Option<f64>,
+    /// Lost, since when it has faced its last keyframe's heading ([`DroneConfig::blind_face_s`]).
+    faced_since: Option<f64>,
     /// The IMU heading at its last SLAM keyframe, radians: where the camera last saw enough
     /// to build the map on…
     keyframe_heading: Option<f64>,
@@ -448,6 +460,7 @@ impl Drone {
             pending: None,
             lost_in: None,
             blind_since: None,
+            faced_since: None,
             keyframe_heading: None,
             keyframe_yaw: None,
             keyframe_at: None,
@@ -838,6 +851,7 @@ impl Drone {
         if used {
             self.lost_at = None;
             self.lost_since = None;
+            self.faced_since = None;
         }
         if used && keyframe {
             self.keyframe_yaw = Some(yaw);
@@ -1074,7 +1088,12 @@ impl Drone {
             return None;
         }
         // Past the turn back, a slow sweep round on the spot over every other view.
-        let sweep = lost.is_some() && lost_for > config.blind_turn_back_s;
+        let sweep = match self.lost_since.filter(|_| lost.is_some()) {
+            Some(since) => {
+                self.turn_back_over(now, since, telemetry.yaw_rad.map(f64::from), config)
+            }
+            None => false,
+        };
         if let Some(at) = lost {
             // The SLAM lost it, the filter still carries the pose (on visual odometry while
             // the camera sees enough, else on its model for a few seconds): stop where that
@@ -1168,6 +1187,29 @@ impl Drone {
         event
     }
 
+    /// Whether the turn back of a drone lost since `since` (its IMU reading `heading` now) is
+    /// over: after [`DroneConfig::blind_turn_back_s`], or once it has faced its last
+    /// keyframe's heading for [`DroneConfig::blind_face_s`] without being found again.
+    fn turn_back_over(
+        &mut self,
+        now: f64,
+        since: f64,
+        heading: Option<f64>,
+        config: &DroneConfig,
+    ) -> bool {
+        let facing = self
+            .keyframe_heading
+            .zip(heading)
+            .is_some_and(|(k, h)| wrap_angle(k - h).abs() < FACING_RAD);
+        if facing {
+            self.faced_since.get_or_insert(now);
+        }
+        now - since >= config.blind_turn_back_s
+            || self
+                .faced_since
+                .is_some_and(|t| now - t >= config.blind_face_s)
+    }
+
     /// No valid pose: hover level with altitude held (thesis Algorithm 7) — braking the drift
     /// while visual odometry measures it — climbing only to finish a take-off, turning back to
     /// the heading of the last keyframe, then slowly round so the camera sweeps over known
@@ -1200,8 +1242,9 @@ impl Drone {
         // First back to the heading of the last keyframe (the camera lost the map turning away
         // from it, mostly during a look around, to a far wall beyond its depth range), then a
         // slow turn over every other view.
+        let turning_back = !self.turn_back_over(now, since, heading, config);
         let yaw = match (self.keyframe_heading, heading) {
-            (Some(fixed), Some(heading)) if now - since < config.blind_turn_back_s => {
+            (Some(fixed), Some(heading)) if turning_back => {
                 let off = wrap_angle(fixed - heading);
                 // Clockwise sticks are positive; full turn rate beyond 0.3 rad off.
                 -config.blind_yaw * (off / 0.3).clamp(-1.0, 1.0) as f32
@@ -1836,6 +1879,50 @@ mod tests {
         }
         assert_eq!(drone.sticks.expect("sticks").yaw, config.blind_yaw);
         assert_eq!(drone.phase, Phase::Exploring);
+    }
+
+    #[test]
+    fn a_lost_drone_already_facing_its_last_keyframes_way_sweeps_once_that_view_finds_nothing() {
+        // Lost while facing the way its last keyframe faced (a bare wall, say): once it has
+        // faced it for `blind_face_s` without being found, the slow sweep begins, long before
+        // the turn back's time is up; flying on visual odometry or blind alike.
+        let config = DroneConfig::default();
+        assert!(config.blind_face_s + 1.0 < config.blind_turn_back_s);
+        let sweep_after = |odometry: bool| {
+            let vehicle = Arc::new(StubbornVehicle::default());
+            *vehicle.yaw.lock().unwrap() = Some(0.05);
+            let mut drone = exploring_drone(vehicle, &config);
+            drone.set_plan(Some([5.0, 0.0]), vec![[0.0, 0.0], [5.0, 0.0]], None, 0.0);
+            drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.0, None, true);
+            drone.tick(0.1, &config);
+            // Blind: once the filter's pose expires without fixes.
+            let mut t = 0.1;
+            while !odometry && drone.pose().is_some() {
+                t += 0.1;
+                drone.tick(t, &config);
+            }
+            let lost = t;
+            while t < lost + config.blind_turn_back_s {
+                t += 0.1;
+                if odometry {
+                    drone.slam_lost(t, &config);
+                    drone.slam_odometry(t - 0.1, t, &Isometry3::identity());
+                }
+                drone.tick(t, &config);
+                assert_eq!(drone.pose().is_some(), odometry, "at {t:.1} s");
+                if drone.sticks.expect("sticks").yaw == config.blind_yaw {
+                    return t - lost;
+                }
+            }
+            panic!("no sweep within the turn back's time");
+        };
+        for odometry in [true, false] {
+            let after = sweep_after(odometry);
+            assert!(
+                (config.blind_face_s..config.blind_face_s + 1.0).contains(&after),
+                "odometry {odometry}: the sweep began {after:.1} s after the loss"
+            );
+        }
     }
 
     #[test]
