@@ -168,22 +168,14 @@ fn run_dataset(args: &RunArgs) -> anyhow::Result<()> {
         let ds = &sets[k];
         let (grey, depth) = ds.load(i)?;
         let t = std::time::Instant::now();
-        let report = system.process(Frame {
-            robot: k,
+        let report = system.process(Frame::images_only(
+            k,
             stamp,
             grey,
             depth,
-            depth_scale: ds.depth_scale,
-            camera: ds.camera,
-            heading: None,
-            heading_steady: false,
-            turning_heading: None,
-            height: None,
-            tilt: None,
-            predicted_body: None,
-            predicted_sigma_m: None,
-            known_camera_pose: None,
-        })?;
+            ds.depth_scale,
+            ds.camera,
+        ))?;
         slam_s += t.elapsed().as_secs_f64();
         if let Tracking::Lost(why) = &report.tracking {
             tracing::warn!("camera {} frame {i}: tracking lost: {why}", k + 1);

@@ -300,6 +300,37 @@ pub struct Frame {
     pub known_camera_pose: Option<Isometry3<f64>>,
 }
 
+impl Frame {
+    /// A frame of robot `robot` at `stamp` with its images alone (a hand-held camera, a
+    /// dataset): no heading, height, tilt, prediction or known pose. A vehicle's caller sets
+    /// what it measured on top (`Frame { heading, ..Frame::images_only(…) }`).
+    pub fn images_only(
+        robot: usize,
+        stamp: f64,
+        grey: GrayImage,
+        depth: Vec<u16>,
+        depth_scale: f64,
+        camera: Pinhole,
+    ) -> Self {
+        Self {
+            robot,
+            stamp,
+            grey,
+            depth,
+            depth_scale,
+            camera,
+            heading: None,
+            heading_steady: false,
+            turning_heading: None,
+            height: None,
+            tilt: None,
+            predicted_body: None,
+            predicted_sigma_m: None,
+            known_camera_pose: None,
+        }
+    }
+}
+
 /// What happened to one frame.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Tracking {
@@ -2377,22 +2408,14 @@ mod tests {
     /// A frame of robot 0 at `stamp` with nothing measured: the tests that call the tracker
     /// directly give it what they need (its observation comes separately).
     fn bare_frame(stamp: f64) -> Frame {
-        Frame {
-            robot: 0,
+        Frame::images_only(
+            0,
             stamp,
-            grey: image::GrayImage::new(1, 1),
-            depth: vec![0],
-            depth_scale: 0.001,
-            camera: crate::dataset::Pinhole::TUM_FR1,
-            heading: None,
-            heading_steady: false,
-            turning_heading: None,
-            height: None,
-            tilt: None,
-            predicted_body: None,
-            predicted_sigma_m: None,
-            known_camera_pose: None,
-        }
+            image::GrayImage::new(1, 1),
+            vec![0],
+            0.001,
+            crate::dataset::Pinhole::TUM_FR1,
+        )
     }
 
     /// A vehicle's camera 10 cm ahead of and 5 cm above its body's centre, looking along the

@@ -703,27 +703,19 @@ fn a_camera_on_the_real_fr1_xyz_motion_is_tracked_to_within_two_centimetres() {
         .into_luma8();
         let k = camera.intrinsics;
         let report = slam
-            .process(Frame {
-                robot: 0,
-                stamp: s.t - t0,
+            .process(Frame::images_only(
+                0,
+                s.t - t0,
                 grey,
                 depth,
-                depth_scale: 0.001,
-                camera: Pinhole {
+                0.001,
+                Pinhole {
                     fx: k.fx.into(),
                     fy: k.fy.into(),
                     cx: k.cx.into(),
                     cy: k.cy.into(),
                 },
-                heading: None,
-                heading_steady: false,
-                turning_heading: None,
-                height: None,
-                tilt: None,
-                predicted_body: None,
-                predicted_sigma_m: None,
-                known_camera_pose: None,
-            })
+            ))
             .expect("frame");
         if let Tracking::Lost(_) = report.tracking {
             lost += 1;
