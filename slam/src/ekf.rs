@@ -73,8 +73,8 @@ pub struct EkfConfig {
     /// Visual odometry measuring a faster motion than this is refused, m/s: an indoor drone
     /// never flies that fast (ours at most 0.5 m/s), so it is a wrong registration (in SITL, a
     /// lost drone's step of 0.15 m in 0.1 s, taken as 1.2 m/s just after the loss had widened
-    /// the velocity's uncertainty, set the brake against a drift that was not there: 9 of 144
-    /// collisions in traced missions came within 3 s of such a step).
+    /// the velocity's uncertainty, set the brake against a drift that was not there: 5 of 156
+    /// collisions in traced missions came within 3 s of a step faster than 1 m/s).
     pub odometry_max_speed: f64,
     /// Attitude (roll, pitch) noise of the flight controller's estimate, radians.
     pub attitude_sigma: f64,
@@ -845,7 +845,11 @@ mod tests {
         // A drift of 0.3 m/s is measured as ever.
         ekf.predict(2.2);
         assert_eq!(ekf.update_odometry(2.1, 2.2, [0.03, 0.0]), Update::Applied);
-        assert!(ekf.estimate().velocity[0] > 0.1, "{:?}", ekf.estimate().velocity);
+        assert!(
+            ekf.estimate().velocity[0] > 0.1,
+            "{:?}",
+            ekf.estimate().velocity
+        );
     }
 
     #[test]

@@ -1382,7 +1382,7 @@ impl Slam {
         // that no constant-velocity model follows; there every registration is built on. The
         // next frame is still predicted from the weak pose: tried from where the motion before
         // it carried the camera instead, drones were lost two to three times as often (stop
-        // 49's batches in the README).
+        // 49's batches in docs/exploration-history.md).
         let (max_t, max_r) = self.config.weak_agreement;
         let weak = frame.predicted_body.is_some()
             && reg.inliers < self.config.keyframe_min_inliers

@@ -907,7 +907,8 @@ impl Drone {
 
     /// The SLAM could not place this drone's frame taken at `stamp`: it goes back to where its
     /// last keyframe was taken, if that is within `config.lost_back_m`, else it stops where it
-    /// is; a look around it was flying ends once it is found again.
+    /// is; a look around it was flying turns on once it is found again, or ends then if its
+    /// losses add up to more than [`DroneConfig::look_lost_s`].
     pub fn slam_lost(&mut self, stamp: f64, config: &DroneConfig) {
         if let Some(scan) = &mut self.scan {
             scan.lost(stamp);
