@@ -110,8 +110,10 @@ pub struct DroneConfig {
     pub follower: FollowerConfig,
     /// Pose filter.
     pub ekf: EkfConfig,
-    /// Holding still (a look around, a turn, a hover), an error under this is left to the
-    /// autopilot's own position hold instead of chasing the pose estimate's noise, metres.
+    /// Holding still (a look around, a turn, a hover), an error under this is not flown: the
+    /// roll and pitch sticks stay centred instead of chasing the pose estimate's noise, metres.
+    /// (ALT_HOLD, the mode flown, has no position hold of its own: a real drift this small
+    /// goes unbraked until it passes the band.)
     pub hold_band_m: f64,
     /// The position setpoint never leads toward a wall of the map nearer than the clearance to
     /// the drone's centre, leads back out to it, and leads less far near walls
