@@ -179,7 +179,7 @@ fn nearest_sides(mut walls: Vec<([f64; 2], f64)>) -> Vec<([f64; 2], f64)> {
 
 /// Every occupied cell nearer than `within_m` to `position`: the unit direction from the cell's
 /// nearest point to the position, and the distance between them.
-fn walls_near(map: &Grid, position: [f64; 2], within_m: f64) -> Vec<([f64; 2], f64)> {
+pub(crate) fn walls_near(map: &Grid, position: [f64; 2], within_m: f64) -> Vec<([f64; 2], f64)> {
     if !(within_m > 0.0 && position.iter().all(|v| v.is_finite())) {
         return vec![];
     }

@@ -12,6 +12,7 @@ pub mod grid;
 pub mod inflate;
 pub mod local;
 pub mod mission;
+pub mod proximity;
 pub mod render;
 pub mod search;
 pub mod sweep;

@@ -819,6 +819,11 @@ impl Slam {
         self.robots.len()
     }
 
+    /// Where robot `k`'s camera sits on its body (`None`: no such robot).
+    pub fn body_from_camera(&self, k: usize) -> Option<Isometry3<f64>> {
+        self.robots.get(k).map(|r| r.setup.body_from_camera)
+    }
+
     /// A handle on the occupancy map of the map frame, for readers on other threads.
     pub fn map(&self) -> MapHandle {
         self.map.handle()

@@ -13,6 +13,7 @@ use nav::avoid::{KeepClear, brake_toward_walls, keep_clear};
 use nav::control::{PidGains, Pose3, PositionController, PositionGains};
 use nav::local::{Follow, FollowerConfig, PathFollower, Pose2, wrap_angle};
 use nav::mission::SAME_FRONTIER_M;
+use nav::proximity::{Proximity, ProximityConfig};
 use nav::sweep::{self, View};
 use slam::ekf::{Ekf, EkfConfig, Input, Update};
 
@@ -169,6 +170,9 @@ pub struct DroneConfig {
     pub blind_brake_max: f64,
     /// … and nothing below this speed, m/s (the measurement's noise).
     pub blind_brake_band: f64,
+    /// With no pose, the drone leans away from walls its depth camera saw near
+    /// ([`nav::proximity`]).
+    pub proximity: ProximityConfig,
     /// When its battery is low (return to the start and land there) and when charged.
     pub battery: battery::Limits,
     /// Landed for a low battery, wait there for a charged one and rejoin the exploration;
@@ -236,6 +240,7 @@ impl Default for DroneConfig {
             blind_brake_gain: 0.5,
             blind_brake_max: 0.15,
             blind_brake_band: 0.03,
+            proximity: ProximityConfig::default(),
             battery: battery::Limits {
                 // The simulated vehicle's battery failsafe lands it at 10 %.
                 reserve_pct: 15,
@@ -446,6 +451,10 @@ pub struct Drone {
     gauge: battery::Gauge,
     /// The length of its way home on the last map planned on, metres.
     way_home_m: Option<f64>,
+    /// The walls round it, as its camera saw them lately.
+    proximity: Proximity,
+    /// Leaning off a wall while blind (for the trace: said once a time).
+    pushed_off: bool,
     /// Charged batteries it took off again on.
     pub battery_swaps: u32,
 }
@@ -518,6 +527,8 @@ impl Drone {
             charged_since: None,
             gauge: battery::Gauge::default(),
             way_home_m: None,
+            proximity: Proximity::new(&config.proximity),
+            pushed_off: false,
             battery_swaps: 0,
         }
     }
@@ -819,6 +830,10 @@ impl Drone {
     /// carries the pose on as between frames.
     pub fn take_fix(&mut self, now: f64, fix: &SlamFix, config: &DroneConfig) {
         self.camera_frame(now, fix.half_fov_rad);
+        if let Some(heading) = fix.heading {
+            self.proximity
+                .observe(fix.stamp, heading, &fix.ranges, &config.proximity);
+        }
         self.inliers = fix.inliers;
         if fix.weak {
             return;
@@ -1123,6 +1138,12 @@ impl Drone {
         self.blind_since = None;
         self.tracking = false;
         let here = [pose[0], pose[1]];
+        // The map's walls all round, for the moment it goes blind (the camera sees only ahead).
+        if let (Some(map), Some(heading)) = (&self.map, telemetry.yaw_rad) {
+            let around = nav::proximity::map_readings(map, here, pose[3], &config.proximity);
+            self.proximity
+                .observe(now, f64::from(heading), &around, &config.proximity);
+        }
         let mut event = None;
         let lost = self
             .lost_at
@@ -1300,9 +1321,28 @@ impl Drone {
             _ => config.blind_yaw,
         };
         // Level, unless visual odometry still measures how the drone drifts: then against it.
-        let [roll, pitch] = self.ekf.valid_velocity().map_or([0.0; 2], |v| {
+        let [mut roll, mut pitch] = self.ekf.valid_velocity().map_or([0.0; 2], |v| {
             brake(v, self.ekf.estimate().attitude[2], config)
         });
+        // And off the walls the camera saw near (it drifts with the air meanwhile).
+        if let Some(heading) = heading {
+            let [forward, left] = self.proximity.push(now, heading, &config.proximity);
+            let pushing = forward != 0.0 || left != 0.0;
+            if pushing && !self.pushed_off {
+                tracing::debug!(
+                    drone = self.id + 1,
+                    stamp = now,
+                    nearest_m = self.proximity.nearest(now, &config.proximity),
+                    forward,
+                    left,
+                    "without a pose near a wall: leaning off it"
+                );
+            }
+            self.pushed_off = pushing;
+            let limit = 1.0;
+            pitch = (f64::from(pitch) + forward).clamp(-limit, limit) as f32;
+            roll = (f64::from(roll) - left).clamp(-limit, limit) as f32;
+        }
         self.set_sticks(Sticks {
             roll,
             pitch,
@@ -1721,7 +1761,7 @@ mod tests {
     }
 
     #[test]
-    fn holding_still_a_small_error_is_left_to_the_autopilot_a_larger_one_is_flown_back() {
+    fn holding_still_an_error_within_the_band_is_not_flown_a_larger_one_is_flown_back() {
         let config = DroneConfig::default();
         let mut drone = exploring_drone(Arc::default(), &config);
         // Looking around at the start (0, 0), facing +x.
@@ -2038,6 +2078,8 @@ mod tests {
             weak,
             odometry: None,
             half_fov_rad: 0.5,
+            ranges: vec![],
+            heading: None,
         };
         let mut t = 0.1;
         drone.take_fix(t, &fix(t, 0.0, false), &config);
@@ -2124,6 +2166,92 @@ mod tests {
         // Still: level.
         let s = braking(0.0, 0.0);
         assert_eq!((s.roll, s.pitch), (0.0, 0.0), "within the band");
+    }
+
+    #[test]
+    fn a_drone_without_a_pose_leans_off_a_wall_its_camera_saw_near() {
+        let config = DroneConfig::default();
+        // Lost facing +x (IMU heading 0), its frames showing a flat wall `ahead_m` away, seen
+        // while it headed `seen_heading`: the sticks once the pose has expired.
+        let blind_sticks = |ahead_m: f64, seen_heading: f64| {
+            let vehicle = Arc::new(StubbornVehicle::default());
+            *vehicle.yaw.lock().expect("yaw") = Some(0.0);
+            let mut drone = exploring_drone(vehicle, &config);
+            drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.0, None, true);
+            let wall: Vec<_> = (-5..=5)
+                .map(|i| {
+                    let bearing = f64::from(i) * 0.1;
+                    nav::proximity::Reading {
+                        bearing_rad: bearing,
+                        range_m: Some(ahead_m / bearing.cos()),
+                    }
+                })
+                .collect();
+            let mut t = 0.2;
+            while drone.pose().is_some() || t < 1.0 {
+                let lost = SlamFix {
+                    drone: 0,
+                    stamp: t,
+                    map_from_body: None,
+                    keyframe: false,
+                    inliers: None,
+                    weak: false,
+                    odometry: None,
+                    half_fov_rad: 0.5,
+                    ranges: wall.clone(),
+                    heading: Some(seen_heading),
+                };
+                drone.take_fix(t, &lost, &config);
+                drone.tick(t, &config);
+                t += 0.1;
+                assert!(t < 5.0, "a pose without fixes or odometry must expire");
+            }
+            drone.tick(t, &config);
+            drone.sticks.expect("sticks")
+        };
+        // Far: level, as without a camera.
+        let s = blind_sticks(2.0, 0.0);
+        assert_eq!((s.roll, s.pitch), (0.0, 0.0), "{s:?}");
+        // Near ahead: nose up (leaning back), not sideways, within the limit.
+        let s = blind_sticks(0.4, 0.0);
+        let max = config.proximity.max as f32;
+        assert!(s.pitch < -0.02 && s.pitch >= -max, "{s:?}");
+        assert!(s.roll.abs() < 0.2 * s.pitch.abs(), "{s:?}");
+        // Seen near while it faced left (+y), before it turned back to +x: banked right.
+        let s = blind_sticks(0.4, std::f64::consts::FRAC_PI_2);
+        assert!(s.roll > 0.02 && s.pitch.abs() < 0.2 * s.roll, "{s:?}");
+    }
+
+    #[test]
+    fn a_drone_that_goes_blind_with_a_wall_of_the_map_behind_it_leans_off_it() {
+        let config = DroneConfig::default();
+        // Facing +x at the origin, a wall of the map 0.35 m behind it (x = −0.40 to −0.35);
+        // the SLAM loses it and its pose expires (no camera frames: nothing seen ahead).
+        let blind_sticks = |map: Option<Grid>| {
+            let vehicle = Arc::new(StubbornVehicle::default());
+            *vehicle.yaw.lock().expect("yaw") = Some(0.0);
+            let mut drone = exploring_drone(vehicle, &config);
+            if let Some(map) = map {
+                drone.set_map(Arc::new(map));
+            }
+            drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.0, None, true);
+            drone.tick(0.1, &config);
+            drone.slam_lost(0.2, &config);
+            let t = tick_until_the_pose_expires(&mut drone, 0.2, &config);
+            drone.tick(t + 0.1, &config);
+            drone.sticks.expect("sticks")
+        };
+        let s = blind_sticks(None);
+        assert_eq!((s.roll, s.pitch), (0.0, 0.0), "no map: level, {s:?}");
+        let mut map = Grid::new(40, 40, 0.05, [-1.0, -1.0], nav::Cell::Free);
+        for y in 0..40 {
+            map.set((12, y), nav::Cell::Occupied);
+        }
+        let s = blind_sticks(Some(map));
+        assert!(
+            s.pitch > 0.02 && s.roll.abs() < 0.2 * s.pitch,
+            "forward: {s:?}"
+        );
     }
 
     #[test]

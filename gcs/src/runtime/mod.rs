@@ -305,7 +305,13 @@ impl Runtime {
         recorder: Option<Recorder>,
     ) -> std::io::Result<Self> {
         let sensors = Arc::new(SensorLog::new(drones.len()));
-        let perception = Perception::start(slam, frames, sensors.clone(), recorder.clone())?;
+        let perception = Perception::start(
+            slam,
+            frames,
+            sensors.clone(),
+            recorder.clone(),
+            config.drone.proximity,
+        )?;
         let planner = Planner::start(perception.map())?;
         let t0 = clock.now();
         let drones: Vec<Drone> = drones

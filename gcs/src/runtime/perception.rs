@@ -13,6 +13,7 @@ use std::time::Duration;
 use link::camera::RgbdFrame;
 use nalgebra::Isometry3;
 use nav::local::wrap_angle;
+use nav::proximity::{ProximityConfig, Reading};
 use slam::livemap::MapHandle;
 use slam::system::{Frame, Odometry, RobotEstimate, Slam, SlamStats, Tracking};
 use slam::trajectory::Stamped;
@@ -197,7 +198,7 @@ pub fn heading_steady(readings: impl Iterator<Item = (f64, f64)>, t: f64) -> boo
 }
 
 /// A SLAM pose of one drone's body at a frame's time (`None`: tracking lost).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct SlamFix {
     /// The drone.
     pub drone: usize,
@@ -218,6 +219,10 @@ pub struct SlamFix {
     pub odometry: Option<Odometry>,
     /// Half the camera's horizontal field of view, radians (from the frame's intrinsics).
     pub half_fov_rad: f64,
+    /// The nearest wall in each direction the camera saw ([`proximity_readings`])…
+    pub ranges: Vec<Reading>,
+    /// …while the IMU read this heading, radians (`None`: no heading at the frame's time).
+    pub heading: Option<f64>,
 }
 
 /// The SLAM's state for displays.
@@ -255,12 +260,14 @@ pub struct Perception {
 }
 
 impl Perception {
-    /// Starts the SLAM thread on `frames`.
+    /// Starts the SLAM thread on `frames`; it also ranges the walls in each frame with
+    /// `proximity`'s settings.
     pub fn start(
         slam: Slam,
         frames: Receiver<CameraFrame>,
         sensors: Arc<SensorLog>,
         recorder: Option<Recorder>,
+        proximity: ProximityConfig,
     ) -> std::io::Result<Self> {
         let (fix_tx, fixes) = channel();
         let view = Arc::new(Mutex::new(Arc::new(SlamView::default())));
@@ -280,6 +287,7 @@ impl Perception {
                         stop: &stop,
                         count: &count,
                         recorder: recorder.as_ref(),
+                        proximity: &proximity,
                     };
                     run(slam, &io)
                 })?
@@ -343,6 +351,7 @@ struct Io<'a> {
     stop: &'a AtomicBool,
     count: &'a AtomicU64,
     recorder: Option<&'a Recorder>,
+    proximity: &'a ProximityConfig,
 }
 
 fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
@@ -354,6 +363,7 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
         stop,
         count,
         recorder,
+        proximity,
     } = *io;
     let n = slam.robots();
     let mut truth = vec![vec![]; n];
@@ -380,7 +390,13 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
             continue;
         }
         let known = slam.config().known_poses;
-        let Some(frame) = slam_frame(&f, sensors.at(k, f.stamp), known) else {
+        let at_frame = sensors.at(k, f.stamp);
+        let heading = at_frame.and_then(|s| s.sample.heading.or(s.turning_heading));
+        let ranges = slam
+            .body_from_camera(k)
+            .map(|b| proximity_readings(&f.frame, &b, proximity))
+            .unwrap_or_default();
+        let Some(frame) = slam_frame(&f, at_frame, known) else {
             tracing::warn!(drone = k + 1, "malformed camera frame dropped");
             continue;
         };
@@ -428,6 +444,8 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
             weak: matches!(report.tracking, Tracking::Weak { .. }),
             odometry: report.odometry,
             half_fov_rad: f.frame.intrinsics.half_fov_x(f.frame.width),
+            ranges,
+            heading,
         });
         let processed = count.fetch_add(1, Ordering::Relaxed) + 1;
         let published = SlamView {
@@ -444,6 +462,45 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
         truth,
         online,
     }
+}
+
+/// The nearest wall in each direction a camera frame sees, from its depth image (every other
+/// pixel) placed on the body by `body_from_camera`: what keeps a drone without a pose off the
+/// walls ([`nav::proximity`]).
+pub fn proximity_readings(
+    frame: &RgbdFrame,
+    body_from_camera: &Isometry3<f64>,
+    config: &ProximityConfig,
+) -> Vec<Reading> {
+    let (w, h) = (frame.width as usize, frame.height as usize);
+    let i = frame.intrinsics;
+    let (fx, fy, cx, cy) = (
+        f64::from(i.fx),
+        f64::from(i.fy),
+        f64::from(i.cx),
+        f64::from(i.cy),
+    );
+    if w == 0 || h == 0 || frame.depth_mm.len() != w * h || !(fx > 0.0 && fy > 0.0) {
+        return vec![];
+    }
+    // The bearings of the image's side edges, on the body (the right edge is the lower).
+    let edge = |u: f64| {
+        let ray = body_from_camera.rotation * nalgebra::Vector3::new((u - cx) / fx, 0.0, 1.0);
+        ray.y.atan2(ray.x)
+    };
+    let (a, b) = (edge(0.0), edge(w as f64));
+    let points = (0..h).step_by(2).flat_map(|v| {
+        (0..w).step_by(2).filter_map(move |u| {
+            let z = f64::from(frame.depth_mm[v * w + u]) * 1e-3;
+            (z > 0.0).then(|| {
+                let in_camera =
+                    nalgebra::Point3::new((u as f64 - cx) / fx * z, (v as f64 - cy) / fy * z, z);
+                let in_body = body_from_camera * in_camera;
+                [in_body.x, in_body.y, in_body.z]
+            })
+        })
+    });
+    nav::proximity::readings(points, [a.min(b), a.max(b)], config)
 }
 
 /// The SLAM's input for a camera frame and the vehicle's sample at its time (with the true
@@ -515,6 +572,56 @@ mod tests {
             }),
             truth: None,
         }
+    }
+
+    #[test]
+    fn a_depth_frame_ranges_the_walls_round_the_body_from_the_camera_mount() {
+        // A 64 × 48 Kinect-like frame of a flat wall 1 m ahead of the camera, the camera
+        // 0.1 m ahead of the body's centre (as on the simulated drone), except a strip of
+        // invalid depth (no return) on the image's left quarter.
+        let (width, height) = (64u32, 48u32);
+        let depth_mm = (0..height)
+            .flat_map(|_| (0..width).map(|u| if u < 16 { 0 } else { 1000 }))
+            .collect();
+        let frame = RgbdFrame {
+            vehicle: 1,
+            stamp: Duration::ZERO,
+            width,
+            height,
+            intrinsics: link::camera::Intrinsics::kinect(width, height),
+            rgb: vec![0; (width * height * 3) as usize],
+            depth_mm,
+        };
+        let body_from_camera = crate::fleet::sim_body_from_camera();
+        let config = ProximityConfig::default();
+        let r = proximity_readings(&frame, &body_from_camera, &config);
+        let half_fov = frame.intrinsics.half_fov_x(width);
+        assert_eq!(
+            r.len(),
+            (2.0 * half_fov / config.bearing_step_rad).ceil() as usize
+        );
+        let ahead = r
+            .iter()
+            .min_by(|a, b| a.bearing_rad.abs().total_cmp(&b.bearing_rad.abs()))
+            .expect("a direction ahead");
+        let range = ahead.range_m.expect("the wall ahead");
+        assert!((range - 1.1).abs() < 0.02, "{ahead:?}");
+        // Left in the image is left of the body (positive bearings): the invalid strip
+        // leaves the leftmost directions without a range, the rightmost have one.
+        let leftmost = r
+            .iter()
+            .max_by(|a, b| a.bearing_rad.total_cmp(&b.bearing_rad));
+        let rightmost = r
+            .iter()
+            .min_by(|a, b| a.bearing_rad.total_cmp(&b.bearing_rad));
+        assert!(leftmost.is_some_and(|l| l.bearing_rad > 0.4 && l.range_m.is_none()));
+        assert!(rightmost.is_some_and(|l| l.bearing_rad < -0.4 && l.range_m.is_some()));
+        // A frame whose depth does not fit its size: nothing, no panic.
+        let broken = RgbdFrame {
+            depth_mm: vec![1000; 5],
+            ..frame
+        };
+        assert!(proximity_readings(&broken, &body_from_camera, &config).is_empty());
     }
 
     #[test]

@@ -1,0 +1,434 @@
+//! Keeping a drone without a pose off the walls its depth camera sees.
+//!
+//! A drone whose SLAM pose is invalid hovers level with its altitude held (thesis Algorithm 7),
+//! and drifts with the air: in the simulator's 0.1 m/s gusts, 4 of 7 wall collisions of twelve
+//! missions came from a drone that had been without a pose for 0.9–3.8 s. The map cannot keep
+//! it off a wall then (it does not know where on the map it is), but its camera still measures
+//! how far the walls are. Like ArduPilot's proximity avoidance in AltHold (`AC_Avoid`, which
+//! needs no position either), [`Proximity`] keeps the nearest range seen in each direction,
+//! by IMU heading, for a few seconds (the camera sees ±31° at a time; a lost drone turns to
+//! look for the map, and sees around), and [`Proximity::push`] leans the drone away from
+//! walls nearer than a margin.
+//!
+//! The camera sees only ahead, and a drone drifts backward as often: while the drone still has
+//! a pose, [`map_readings`] ranges the map's walls all round it, so the moment it goes blind
+//! the memory already holds the walls behind it.
+//!
+//! A depth camera measures nothing nearer than its minimum range (0.4 m for a Kinect): a
+//! direction that was near and now shows nothing is taken to be nearer still, not clear.
+
+use crate::Grid;
+use crate::avoid::walls_near;
+use crate::local::wrap_angle;
+use std::f64::consts::{PI, TAU};
+
+/// How near a wall may come, and how hard the drone leans away from it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ProximityConfig {
+    /// Points this far above or below the body (metres) are walls; floor and ceiling are not.
+    pub band_m: f64,
+    /// The width of a direction in a frame's readings, radians.
+    pub bearing_step_rad: f64,
+    /// Directions remembered, round the compass.
+    pub sectors: usize,
+    /// A range older than this is forgotten (the drone drifts on meanwhile), seconds.
+    pub max_age_s: f64,
+    /// The drone leans away from walls nearer than this to its centre, metres…
+    pub margin_m: f64,
+    /// …with this much stick per metre inside the margin…
+    pub gain: f64,
+    /// …up to this much stick.
+    pub max: f64,
+    /// A direction ranged nearer than this that then shows nothing is taken as too near to
+    /// measure (the camera's minimum range plus a little), metres.
+    pub near_m: f64,
+    /// [`map_readings`] range the map's walls this far, metres.
+    pub map_reach_m: f64,
+}
+
+impl Default for ProximityConfig {
+    /// For the simulated drone (radius 0.2 m, a Kinect-like camera 0.1 m ahead of its centre):
+    /// a lean of 0.025 stick balances a 0.15 m/s gust, so the drone settles about 0.5 m from a
+    /// wall it drifts toward, 0.3 m short of touching it.
+    fn default() -> Self {
+        Self {
+            band_m: 0.3,
+            bearing_step_rad: 5f64.to_radians(),
+            sectors: 36,
+            max_age_s: 4.0,
+            margin_m: 0.6,
+            gain: 0.25,
+            max: 0.1,
+            near_m: 0.7,
+            map_reach_m: 1.0,
+        }
+    }
+}
+
+/// The nearest wall in one direction of one camera frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reading {
+    /// The direction in the body frame, radians (0 ahead, counter-clockwise positive).
+    pub bearing_rad: f64,
+    /// Horizontal distance from the body's centre, metres; `None`: nothing measured that way.
+    pub range_m: Option<f64>,
+}
+
+/// The nearest wall in each direction of one camera frame, from its points in the body frame
+/// (x forward, y left, z up, metres) and the camera's horizontal field of view
+/// `[right, left]` edge bearings (radians): every direction in view gets a reading, with no
+/// range where no point of the band lies. The third-nearest point of a direction counts, so
+/// a stray pixel does not.
+pub fn readings(
+    points_in_body: impl IntoIterator<Item = [f64; 3]>,
+    fov_rad: [f64; 2],
+    config: &ProximityConfig,
+) -> Vec<Reading> {
+    let step = config.bearing_step_rad;
+    let [right, left] = fov_rad;
+    if !(step > 0.0 && right.is_finite() && left.is_finite() && left > right) {
+        return vec![];
+    }
+    let bins = ((left - right) / step).ceil().min(360.0) as usize;
+    // The three nearest ranges of each direction, nearest first.
+    let mut nearest = vec![[f64::INFINITY; 3]; bins];
+    for [x, y, z] in points_in_body {
+        if !(x.is_finite() && y.is_finite() && z.abs() <= config.band_m) {
+            continue;
+        }
+        let bearing = y.atan2(x);
+        let i = ((bearing - right) / step).floor();
+        if !(0.0..bins as f64).contains(&i) {
+            continue;
+        }
+        let three = &mut nearest[i as usize];
+        let range = x.hypot(y);
+        if range < three[2] {
+            three[2] = range;
+            three.sort_by(f64::total_cmp);
+        }
+    }
+    nearest
+        .iter()
+        .enumerate()
+        .map(|(i, three)| Reading {
+            bearing_rad: right + (i as f64 + 0.5) * step,
+            range_m: three[2].is_finite().then_some(three[2]),
+        })
+        .collect()
+}
+
+/// The nearest wall of `map` in each direction round a drone at `position` heading `yaw` (map
+/// frame), as readings in the body frame: every direction gets one, `map_reach_m` where no wall
+/// is nearer.
+pub fn map_readings(
+    map: &Grid,
+    position: [f64; 2],
+    yaw: f64,
+    config: &ProximityConfig,
+) -> Vec<Reading> {
+    let step = config.bearing_step_rad;
+    if !(step > 0.0 && yaw.is_finite() && config.map_reach_m > 0.0) {
+        return vec![];
+    }
+    let bins = (TAU / step).ceil().min(360.0) as usize;
+    let mut nearest = vec![config.map_reach_m; bins];
+    for (away, distance) in walls_near(map, position, config.map_reach_m) {
+        // `away` points from the wall to the drone.
+        let bearing = wrap_angle((-away[1]).atan2(-away[0]) - yaw);
+        let i = (((bearing + PI) / step).floor() as usize).min(bins - 1);
+        nearest[i] = nearest[i].min(distance);
+    }
+    nearest
+        .into_iter()
+        .enumerate()
+        .map(|(i, range)| Reading {
+            bearing_rad: -PI + (i as f64 + 0.5) * step,
+            range_m: Some(range),
+        })
+        .collect()
+}
+
+/// The nearest walls round a drone, by heading, as its camera saw them lately.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Proximity {
+    /// Per sector (heading `k · 2π / n`, counter-clockwise from the IMU's zero): the range and
+    /// when it was seen.
+    sectors: Vec<Option<(f64, f64)>>,
+}
+
+impl Proximity {
+    /// Nothing seen yet, with `config.sectors` directions.
+    pub fn new(config: &ProximityConfig) -> Self {
+        Self {
+            sectors: vec![None; config.sectors.max(1)],
+        }
+    }
+
+    fn sector(&self, heading: f64) -> usize {
+        let n = self.sectors.len();
+        let turn = heading.rem_euclid(TAU) / TAU;
+        ((turn * n as f64).round() as usize) % n
+    }
+
+    /// Takes the readings of a frame taken at `stamp` (seconds) while the IMU read `heading`
+    /// (radians).
+    pub fn observe(
+        &mut self,
+        stamp: f64,
+        heading: f64,
+        readings: &[Reading],
+        config: &ProximityConfig,
+    ) {
+        if !(stamp.is_finite() && heading.is_finite()) {
+            return;
+        }
+        // A frame's directions are finer than the sectors: the nearest of each sector's.
+        let mut seen: Vec<Option<Option<f64>>> = vec![None; self.sectors.len()];
+        for r in readings {
+            let k = self.sector(heading + r.bearing_rad);
+            let range = r.range_m.filter(|m| m.is_finite());
+            seen[k] = Some(match (seen[k].flatten(), range) {
+                (Some(a), Some(b)) => Some(a.min(b)),
+                (a, b) => a.or(b),
+            });
+        }
+        for (slot, seen) in self.sectors.iter_mut().zip(seen) {
+            match seen {
+                None => {}
+                Some(Some(range)) => *slot = Some((range, stamp)),
+                // Near before and nothing now: nearer than the camera measures.
+                Some(None) => match *slot {
+                    Some((range, _)) if range < config.near_m => *slot = Some((range, stamp)),
+                    _ => *slot = None,
+                },
+            }
+        }
+    }
+
+    /// The lean (body frame: forward, left; stick units) that keeps a drone heading `heading`
+    /// (radians, IMU) at time `now` off the walls nearer than the margin: away from them, by
+    /// the mean of the directions within the margin weighted by how far inside it they are,
+    /// so a wall seen over many directions counts once and walls either side cancel.
+    pub fn push(&self, now: f64, heading: f64, config: &ProximityConfig) -> [f64; 2] {
+        let n = self.sectors.len() as f64;
+        let (mut sum, mut count) = ([0.0; 2], 0usize);
+        for (k, slot) in self.sectors.iter().enumerate() {
+            let Some((range, seen)) = *slot else { continue };
+            let inside = config.margin_m - range;
+            if inside <= 0.0 || now - seen > config.max_age_s {
+                continue;
+            }
+            let bearing = wrap_angle(k as f64 * TAU / n - heading);
+            let (s, c) = bearing.sin_cos();
+            sum[0] -= inside * c;
+            sum[1] -= inside * s;
+            count += 1;
+        }
+        if count == 0 {
+            return [0.0; 2];
+        }
+        let lean = sum.map(|v| config.gain * v / count as f64);
+        let size = lean[0].hypot(lean[1]);
+        if size > config.max {
+            lean.map(|v| v * config.max / size)
+        } else {
+            lean
+        }
+    }
+
+    /// The nearest remembered range within `max_age_s` of `now`, metres (for logs).
+    pub fn nearest(&self, now: f64, config: &ProximityConfig) -> Option<f64> {
+        self.sectors
+            .iter()
+            .flatten()
+            .filter(|(_, seen)| now - seen <= config.max_age_s)
+            .map(|(range, _)| *range)
+            .reduce(f64::min)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::FRAC_PI_2;
+
+    const FOV: [f64; 2] = [-0.54, 0.54];
+
+    /// The points of a flat wall `d` metres ahead of the body, across the camera's view, at
+    /// heights from −1 to +1 m (floor and ceiling lines included).
+    fn wall_ahead(d: f64) -> Vec<[f64; 3]> {
+        let mut points = vec![];
+        for i in -60..=60 {
+            for j in -10..=10 {
+                points.push([d, d * 0.6 * f64::from(i) / 60.0, f64::from(j) / 10.0]);
+            }
+        }
+        points
+    }
+
+    #[test]
+    fn a_wall_ahead_is_read_in_every_direction_in_view_at_its_slant_range() {
+        let config = ProximityConfig::default();
+        let r = readings(wall_ahead(1.0), FOV, &config);
+        assert_eq!(r.len(), 13);
+        for reading in &r {
+            let range = reading.range_m.expect("every direction sees the wall");
+            // Flat wall: range ≈ 1 / cos(bearing), within a bin's width.
+            let expected = 1.0 / reading.bearing_rad.cos();
+            assert!((range - expected).abs() < 0.03, "{reading:?}");
+        }
+    }
+
+    #[test]
+    fn floor_ceiling_and_stray_points_are_not_walls() {
+        let config = ProximityConfig::default();
+        // Only floor and ceiling points, near: nothing read.
+        let floor = (0..100).map(|i| [0.3 + f64::from(i) * 0.01, 0.0, -0.9]);
+        assert!(
+            readings(floor, FOV, &config)
+                .iter()
+                .all(|r| r.range_m.is_none())
+        );
+        // Two stray pixels at 0.2 m in front of a wall at 2 m: the wall is read.
+        let mut points = wall_ahead(2.0);
+        points.push([0.2, 0.0, 0.0]);
+        points.push([0.21, 0.0, 0.0]);
+        let ahead = readings(points, FOV, &config)
+            .into_iter()
+            .find(|r| r.bearing_rad.abs() < 0.05)
+            .expect("a direction ahead");
+        assert!(
+            (ahead.range_m.expect("range") - 2.0).abs() < 0.01,
+            "{ahead:?}"
+        );
+        // Garbage field of view or points: nothing, no panic.
+        assert!(readings(wall_ahead(1.0), [0.5, -0.5], &config).is_empty());
+        assert!(readings(wall_ahead(1.0), [f64::NAN, 0.5], &config).is_empty());
+        let nan = readings([[f64::NAN, 0.0, 0.0]], FOV, &config);
+        assert!(nan.iter().all(|r| r.range_m.is_none()));
+    }
+
+    #[test]
+    fn a_near_wall_ahead_leans_the_drone_back_and_a_far_one_does_not() {
+        let config = ProximityConfig::default();
+        let mut p = Proximity::new(&config);
+        p.observe(0.0, 0.0, &readings(wall_ahead(2.0), FOV, &config), &config);
+        assert_eq!(p.push(0.1, 0.0, &config), [0.0, 0.0]);
+        p.observe(1.0, 0.0, &readings(wall_ahead(0.45), FOV, &config), &config);
+        let [forward, left] = p.push(1.1, 0.0, &config);
+        assert!(forward < -0.02, "leans back: {forward}");
+        assert!(
+            left.abs() < 0.2 * forward.abs(),
+            "about straight back: {left}"
+        );
+        // Nearer, harder, up to the limit.
+        p.observe(1.2, 0.0, &readings(wall_ahead(0.3), FOV, &config), &config);
+        let nearer = p.push(1.3, 0.0, &config);
+        assert!(nearer[0] < forward, "{nearer:?}");
+        assert!(nearer[0].hypot(nearer[1]) <= config.max + 1e-12);
+    }
+
+    #[test]
+    fn a_wall_seen_before_a_turn_is_pushed_from_where_it_now_lies() {
+        let config = ProximityConfig::default();
+        let mut p = Proximity::new(&config);
+        // Seen ahead at heading 0; the drone has since turned a quarter left: the wall is on
+        // its right, so it leans left.
+        p.observe(0.0, 0.0, &readings(wall_ahead(0.4), FOV, &config), &config);
+        let [forward, left] = p.push(0.5, FRAC_PI_2, &config);
+        assert!(left > 0.02, "leans left: {left}");
+        assert!(forward.abs() < 0.2 * left, "{forward}");
+    }
+
+    #[test]
+    fn walls_either_side_cancel_and_old_ranges_are_forgotten() {
+        let config = ProximityConfig::default();
+        let mut p = Proximity::new(&config);
+        p.observe(
+            0.0,
+            FRAC_PI_2,
+            &readings(wall_ahead(0.4), FOV, &config),
+            &config,
+        );
+        p.observe(
+            0.0,
+            -FRAC_PI_2,
+            &readings(wall_ahead(0.4), FOV, &config),
+            &config,
+        );
+        let [forward, left] = p.push(0.1, 0.0, &config);
+        assert!(
+            forward.abs() < 1e-9 && left.abs() < 1e-9,
+            "{forward} {left}"
+        );
+        // One side only, old: forgotten.
+        let mut q = Proximity::new(&config);
+        q.observe(
+            0.0,
+            FRAC_PI_2,
+            &readings(wall_ahead(0.4), FOV, &config),
+            &config,
+        );
+        assert!(q.push(1.0, 0.0, &config)[1] < 0.0);
+        assert_eq!(q.push(config.max_age_s + 0.1, 0.0, &config), [0.0, 0.0]);
+        assert_eq!(q.nearest(config.max_age_s + 0.1, &config), None);
+    }
+
+    #[test]
+    fn the_map_ranges_the_walls_behind_a_drone_that_its_camera_does_not_see() {
+        let config = ProximityConfig::default();
+        // A wall along x = 0.3–0.35 m (5 cm cells); the drone at the origin facing −x: the
+        // wall is behind it, 0.3 m away.
+        let mut map = Grid::new(40, 40, 0.05, [-1.0, -1.0], crate::Cell::Free);
+        for y in 0..40 {
+            map.set((26, y), crate::Cell::Occupied);
+        }
+        let r = map_readings(&map, [0.0, 0.0], PI, &config);
+        assert_eq!(r.len(), 72);
+        let behind = r
+            .iter()
+            .filter(|r| r.bearing_rad.abs() > PI - 0.05)
+            .filter_map(|r| r.range_m)
+            .reduce(f64::min);
+        assert!(behind.is_some_and(|m| (m - 0.3).abs() < 1e-9), "{behind:?}");
+        let ahead = r
+            .iter()
+            .find(|r| r.bearing_rad.abs() < 0.05)
+            .expect("ahead");
+        assert_eq!(ahead.range_m, Some(config.map_reach_m));
+        // Remembered by IMU heading (here 2.0 rad while the map had it at π): blind, the
+        // drone leans forward, away from the wall.
+        let mut p = Proximity::new(&config);
+        p.observe(0.0, 2.0, &r, &config);
+        let [forward, left] = p.push(1.0, 2.0, &config);
+        assert!(
+            forward > 0.02 && left.abs() < 0.2 * forward,
+            "{forward} {left}"
+        );
+        // No map walls, no garbage: nothing near; a bad yaw: no readings.
+        let open = Grid::new(40, 40, 0.05, [-1.0, -1.0], crate::Cell::Free);
+        let clear = map_readings(&open, [0.0, 0.0], 0.0, &config);
+        assert!(clear.iter().all(|r| r.range_m == Some(config.map_reach_m)));
+        assert!(map_readings(&map, [0.0, 0.0], f64::NAN, &config).is_empty());
+    }
+
+    #[test]
+    fn a_near_wall_that_then_shows_nothing_is_nearer_than_the_camera_measures() {
+        let config = ProximityConfig::default();
+        let nothing = readings(Vec::<[f64; 3]>::new(), FOV, &config);
+        assert_eq!(nothing.len(), 13);
+        // Near, then nothing for longer than a range is kept: still pushed away.
+        let mut p = Proximity::new(&config);
+        p.observe(0.0, 0.0, &readings(wall_ahead(0.5), FOV, &config), &config);
+        for t in 1..=8 {
+            p.observe(f64::from(t), 0.0, &nothing, &config);
+        }
+        assert!(p.push(8.1, 0.0, &config)[0] < -0.01);
+        // Far, then nothing (beyond the camera's range): clear.
+        let mut q = Proximity::new(&config);
+        q.observe(0.0, 0.0, &readings(wall_ahead(1.5), FOV, &config), &config);
+        q.observe(1.0, 0.0, &nothing, &config);
+        assert_eq!(q.nearest(1.1, &config), None);
+    }
+}
