@@ -588,13 +588,8 @@ fn write_record(w: &mut McapWriter, ch: &mut Channels, r: &Record) -> Result<u64
                 };
                 ch.write(w, c, *t, &encode(&m)?)?;
             }
-            let i = frame.intrinsics;
-            let (fx, fy, cx, cy) = (
-                f64::from(i.fx),
-                f64::from(i.fy),
-                f64::from(i.cx),
-                f64::from(i.cy),
-            );
+            let slam::dataset::Pinhole { fx, fy, cx, cy } =
+                crate::runtime::perception::pinhole(&frame.intrinsics);
             let c =
                 ch.foxglove::<CameraCalibration>(w, &format!("/drone{k}/camera/calibration"))?;
             let m = CameraCalibration {

@@ -473,13 +473,7 @@ pub fn proximity_readings(
     config: &ProximityConfig,
 ) -> Vec<Reading> {
     let (w, h) = (frame.width as usize, frame.height as usize);
-    let i = frame.intrinsics;
-    let (fx, fy, cx, cy) = (
-        f64::from(i.fx),
-        f64::from(i.fy),
-        f64::from(i.cx),
-        f64::from(i.cy),
-    );
+    let slam::dataset::Pinhole { fx, fy, cx, cy } = pinhole(&frame.intrinsics);
     if w == 0 || h == 0 || frame.depth_mm.len() != w * h || !(fx > 0.0 && fy > 0.0) {
         return vec![];
     }
@@ -503,13 +497,22 @@ pub fn proximity_readings(
     nav::proximity::readings(points, [a.min(b), a.max(b)], config)
 }
 
+/// A stream's camera intrinsics as the SLAM's pinhole model.
+pub fn pinhole(i: &link::camera::Intrinsics) -> slam::dataset::Pinhole {
+    slam::dataset::Pinhole {
+        fx: f64::from(i.fx),
+        fy: f64::from(i.fy),
+        cx: f64::from(i.cx),
+        cy: f64::from(i.cy),
+    }
+}
+
 /// The SLAM's input for a camera frame and the vehicle's sample at its time (with the true
 /// camera pose only when the SLAM maps on known poses); `None` for a frame of the wrong size.
 pub fn slam_frame(f: &CameraFrame, sensors: Option<FrameSensors>, known: bool) -> Option<Frame> {
     let sample = sensors.map(|s| s.sample);
     let rgb = image::RgbImage::from_raw(f.frame.width, f.frame.height, f.frame.rgb.clone())?;
     let grey = image::DynamicImage::ImageRgb8(rgb).into_luma8();
-    let i = f.frame.intrinsics;
     let predicted = sample.and_then(|s| s.body).map(|b| {
         Isometry3::new(
             nalgebra::Vector3::new(b[0], b[1], b[2]),
@@ -522,12 +525,7 @@ pub fn slam_frame(f: &CameraFrame, sensors: Option<FrameSensors>, known: bool) -
         grey,
         depth: f.frame.depth_mm.clone(),
         depth_scale: 0.001,
-        camera: slam::dataset::Pinhole {
-            fx: f64::from(i.fx),
-            fy: f64::from(i.fy),
-            cx: f64::from(i.cx),
-            cy: f64::from(i.cy),
-        },
+        camera: pinhole(&f.frame.intrinsics),
         heading: sample.and_then(|s| s.heading),
         heading_steady: sensors.is_some_and(|s| s.heading_steady),
         turning_heading: sensors.and_then(|s| s.turning_heading),
