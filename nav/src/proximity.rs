@@ -237,12 +237,13 @@ impl Proximity {
         }
     }
 
-    /// The nearest remembered range within `max_age_s` of `now`, metres (for logs).
+    /// The nearest range seen within `max_age_s` of `now`, if nearer than `map_reach_m` (the
+    /// map's ranges reach no further), metres: for logs.
     pub fn nearest(&self, now: f64, config: &ProximityConfig) -> Option<f64> {
         self.sectors
             .iter()
             .flatten()
-            .filter(|(_, seen)| now - seen <= config.max_age_s)
+            .filter(|(range, seen)| now - seen <= config.max_age_s && *range < config.map_reach_m)
             .map(|(range, _)| *range)
             .reduce(f64::min)
     }
@@ -406,10 +407,17 @@ mod tests {
             forward > 0.02 && left.abs() < 0.2 * forward,
             "{forward} {left}"
         );
+        assert!(
+            p.nearest(1.0, &config)
+                .is_some_and(|m| (m - 0.3).abs() < 1e-9)
+        );
         // No map walls, no garbage: nothing near; a bad yaw: no readings.
         let open = Grid::new(40, 40, 0.05, [-1.0, -1.0], crate::Cell::Free);
         let clear = map_readings(&open, [0.0, 0.0], 0.0, &config);
         assert!(clear.iter().all(|r| r.range_m == Some(config.map_reach_m)));
+        let mut q = Proximity::new(&config);
+        q.observe(0.0, 0.0, &clear, &config);
+        assert_eq!(q.nearest(0.5, &config), None, "nothing near");
         assert!(map_readings(&map, [0.0, 0.0], f64::NAN, &config).is_empty());
     }
 

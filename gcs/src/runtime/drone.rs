@@ -1352,6 +1352,12 @@ impl Drone {
         None
     }
 
+    /// The nearest wall it keeps in mind at `now` (camera and map ranges by heading; what it
+    /// leans off when blind), metres; `None` when none was ranged lately.
+    pub fn nearest_wall(&self, now: f64, config: &DroneConfig) -> Option<f64> {
+        self.proximity.nearest(now, &config.proximity)
+    }
+
     fn follow(&mut self, pose: [f64; 4]) -> Follow {
         let f = self.follower.step(Some(Pose2 {
             x: pose[0],

@@ -711,6 +711,7 @@ impl Mission {
                     pose,
                     pose_sigma_m,
                     tilt,
+                    nearest_wall_m: d.nearest_wall(now, &self.config.drone),
                     phase: d.phase.name(),
                 });
             }
