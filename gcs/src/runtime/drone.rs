@@ -170,8 +170,8 @@ pub struct DroneConfig {
     pub blind_brake_max: f64,
     /// … and nothing below this speed, m/s (the measurement's noise).
     pub blind_brake_band: f64,
-    /// With no pose, the drone leans away from walls its depth camera saw near
-    /// ([`nav::proximity`]).
+    /// With no pose, the drone leans away from walls its depth camera ranged near lately, or
+    /// the map had round it when it went blind ([`nav::proximity`]).
     pub proximity: ProximityConfig,
     /// When its battery is low (return to the start and land there) and when charged.
     pub battery: battery::Limits,
@@ -451,9 +451,10 @@ pub struct Drone {
     gauge: battery::Gauge,
     /// The length of its way home on the last map planned on, metres.
     way_home_m: Option<f64>,
-    /// The walls round it, as its camera saw them lately.
+    /// The walls round it, as its camera ranged them lately and the map had them while it had
+    /// a pose.
     proximity: Proximity,
-    /// Leaning off a wall while blind (for the trace: said once a time).
+    /// Leaning off a wall while blind (the trace says so once each time it starts).
     pushed_off: bool,
     /// Charged batteries it took off again on.
     pub battery_swaps: u32,
@@ -1324,7 +1325,8 @@ impl Drone {
         let [mut roll, mut pitch] = self.ekf.valid_velocity().map_or([0.0; 2], |v| {
             brake(v, self.ekf.estimate().attitude[2], config)
         });
-        // And off the walls the camera saw near (it drifts with the air meanwhile).
+        // And off the walls round it, ranged by the camera or on the map before it went blind
+        // (it drifts with the air meanwhile).
         if let Some(heading) = heading {
             let [forward, left] = self.proximity.push(now, heading, &config.proximity);
             let pushing = forward != 0.0 || left != 0.0;
@@ -1339,9 +1341,8 @@ impl Drone {
                 );
             }
             self.pushed_off = pushing;
-            let limit = 1.0;
-            pitch = (f64::from(pitch) + forward).clamp(-limit, limit) as f32;
-            roll = (f64::from(roll) - left).clamp(-limit, limit) as f32;
+            pitch = (f64::from(pitch) + forward).clamp(-1.0, 1.0) as f32;
+            roll = (f64::from(roll) - left).clamp(-1.0, 1.0) as f32;
         }
         self.set_sticks(Sticks {
             roll,
