@@ -47,9 +47,10 @@ pub struct ProximityConfig {
 }
 
 impl Default for ProximityConfig {
-    /// For the simulated drone (radius 0.2 m, a Kinect-like camera 0.1 m ahead of its centre):
-    /// a lean of 0.025 stick balances a 0.15 m/s gust, so the drone settles about 0.5 m from a
-    /// wall it drifts toward, 0.3 m short of touching it.
+    /// For the simulated drone (radius 0.2 m, a Kinect-like camera 0.1 m ahead of its centre,
+    /// 0.01 stick holding about 0.06 m/s of air): a flat wall 0.5 m off leans it by 0.016
+    /// stick, which balances a 0.1 m/s gust (the simulator's σ); 0.4 m off, by 0.035 stick,
+    /// a 0.2 m/s gust, 0.2 m short of touching.
     fn default() -> Self {
         Self {
             band_m: 0.3,
@@ -65,7 +66,7 @@ impl Default for ProximityConfig {
     }
 }
 
-/// The nearest wall in one direction of one camera frame.
+/// The nearest wall in one direction, from a camera frame or the map.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Reading {
     /// The direction in the body frame, radians (0 ahead, counter-clockwise positive).
@@ -149,7 +150,8 @@ pub fn map_readings(
         .collect()
 }
 
-/// The nearest walls round a drone, by heading, as its camera saw them lately.
+/// The nearest walls round a drone, by heading, as its camera ranged them lately and the map
+/// had them while it had a pose.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Proximity {
     /// Per sector (heading `k · 2π / n`, counter-clockwise from the IMU's zero): the range and
@@ -219,8 +221,7 @@ impl Proximity {
             if inside <= 0.0 || now - seen > config.max_age_s {
                 continue;
             }
-            let bearing = wrap_angle(k as f64 * TAU / n - heading);
-            let (s, c) = bearing.sin_cos();
+            let (s, c) = (k as f64 * TAU / n - heading).sin_cos();
             sum[0] -= inside * c;
             sum[1] -= inside * s;
             count += 1;
