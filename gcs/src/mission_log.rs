@@ -176,7 +176,7 @@ pub fn read(bytes: &[u8], origin: &str) -> anyhow::Result<MissionLog> {
             }
             frames.push(CameraFrame {
                 drone: k,
-                stamp: t as f64 * 1e-9,
+                stamp: seconds(t),
                 frame: Arc::new(RgbdFrame {
                     vehicle: u8::try_from(k).unwrap_or(u8::MAX),
                     stamp: std::time::Duration::from_nanos(t),
@@ -251,10 +251,7 @@ pub fn decision_at(bytes: &[u8], origin: &str, t: f64) -> anyhow::Result<Decisio
                 setup = serde_json::from_slice::<Setup>(&m.data).ok();
             }
             "/map" => {
-                let at = m.log_time as f64 * 1e-9;
-                let same = last_plan
-                    .as_ref()
-                    .is_some_and(|p: &RecordedPlan| (p.t - at).abs() < 1e-3);
+                let (at, same) = map_time(m.log_time, last_plan.as_ref());
                 if found && !same {
                     break;
                 }
@@ -300,6 +297,22 @@ pub fn decision_at(bytes: &[u8], origin: &str, t: f64) -> anyhow::Result<Decisio
         grid,
         grid_t,
     })
+}
+
+/// A log time (nanoseconds) in seconds of the mission clock.
+fn seconds(log_time: u64) -> f64 {
+    log_time as f64 / 1e9
+}
+
+/// When a map was recorded (seconds) and whether it is the map of `plan`, the decision read
+/// last. The recorder writes a decision's map just after it at its time, so that map takes
+/// the decision's own time, of which its nanosecond log time is only the nearest.
+fn map_time(log_time: u64, plan: Option<&RecordedPlan>) -> (f64, bool) {
+    let at = seconds(log_time);
+    match plan {
+        Some(p) if (p.t - at).abs() < 1e-3 => (p.t, true),
+        _ => (at, false),
+    }
 }
 
 /// A recorded pose as an isometry (`None` when incomplete or not a rotation).
@@ -572,6 +585,30 @@ mod tests {
             assert_eq!(c.blacklist, vec![[1.0, 2.0]]);
             assert_eq!(c.held, vec![Some([3.0, 4.0]), None]);
         }
+    }
+
+    #[test]
+    fn the_map_written_with_a_decision_is_dated_at_the_decision_to_the_last_bit() {
+        // 20.29 s once came back as 20.290000000000003 from its log time.
+        for k in 0..200_000u64 {
+            let t = k as f64 * 0.01;
+            let plan = RecordedPlan {
+                t,
+                goals: vec![],
+                given_up: vec![],
+            };
+            for log_time in [crate::record::log_time(t), (t * 1e9) as u64] {
+                assert_eq!(map_time(log_time, Some(&plan)), (t, true), "{t} s");
+            }
+        }
+        // A map from before the decision keeps its own time.
+        let plan = RecordedPlan {
+            t: 20.29,
+            goals: vec![],
+            given_up: vec![],
+        };
+        assert_eq!(map_time(19_500_000_000, Some(&plan)), (19.5, false));
+        assert_eq!(map_time(19_500_000_000, None), (19.5, false));
     }
 
     #[test]

@@ -473,7 +473,7 @@ impl Channels {
         data: &[u8],
     ) -> Result<(), String> {
         self.sequence = self.sequence.wrapping_add(1);
-        let ns = (t.max(0.0) * 1e9) as u64;
+        let ns = log_time(t);
         w.write_to_known_channel(
             &mcap::records::MessageHeader {
                 channel_id: channel,
@@ -491,6 +491,11 @@ fn encode<T: Encode>(m: &T) -> Result<Vec<u8>, String> {
     let mut buf = Vec::with_capacity(m.encoded_len().unwrap_or(256));
     m.encode(&mut buf).map_err(|e| e.to_string())?;
     Ok(buf)
+}
+
+/// A mission time (seconds) as an MCAP log time: nanoseconds, the nearest.
+pub(crate) fn log_time(t: f64) -> u64 {
+    (t.max(0.0) * 1e9).round() as u64
 }
 
 fn stamp(t: f64) -> Option<Timestamp> {
