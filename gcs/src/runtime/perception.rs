@@ -212,8 +212,10 @@ pub struct SlamFix {
     /// camera sees: few, and the next frame may be lost, and its pose counts for less);
     /// `None` when relocalised, lost or placed at a known pose.
     pub inliers: Option<usize>,
-    /// The pose is a weak registration away from the motion so far ([`Tracking::Weak`]): the
-    /// drone is not flown on it (nor taken for lost).
+    /// The frame gives no pose to fly on, though the SLAM still tracks the drone: a weak
+    /// registration away from the motion so far ([`Tracking::Weak`]), or a frame skipped as a
+    /// change of speed the drone cannot make ([`Tracking::Skipped`]). The drone is not flown on
+    /// it (nor taken for lost).
     pub weak: bool,
     /// While lost: how the body moved since the drone's previous frame (visual odometry).
     pub odometry: Option<Odometry>,
@@ -420,6 +422,9 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
             Tracking::Weak { inliers } => {
                 tracing::debug!(drone = k + 1, stamp = f.stamp, inliers, "weak registration");
             }
+            Tracking::Skipped(why) => {
+                tracing::debug!(drone = k + 1, stamp = f.stamp, "frame skipped: {why}");
+            }
             _ => {}
         }
         if let Some(t) = f.truth {
@@ -428,8 +433,11 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
                 pose: t,
             });
         }
+        let skipped = matches!(report.tracking, Tracking::Skipped(_));
         let estimate = slam.estimate(k);
-        if let Some(pose) = estimate.as_ref().and_then(RobotEstimate::map_from_camera) {
+        if let Some(pose) = estimate.as_ref().and_then(RobotEstimate::map_from_camera)
+            && !skipped
+        {
             online[k].push(Stamped { t: f.stamp, pose });
         }
         let _ = fixes.send(SlamFix {
@@ -441,7 +449,7 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
                 Tracking::Tracked { inliers } | Tracking::Weak { inliers } => Some(inliers),
                 _ => None,
             },
-            weak: matches!(report.tracking, Tracking::Weak { .. }),
+            weak: skipped || matches!(report.tracking, Tracking::Weak { .. }),
             odometry: report.odometry,
             half_fov_rad: f.frame.intrinsics.half_fov_x(f.frame.width),
             ranges,
