@@ -63,15 +63,6 @@ pub struct SlamConfig {
     pub max_frame_translation: f64,
     /// …or radians.
     pub max_frame_rotation: f64,
-    /// On a vehicle (frames with [`Frame::predicted_body`]): between consecutive tracked frames
-    /// the camera's velocity changes by at most this much, m/s, plus this much per second
-    /// between them, m/s². A frame registered only with a larger change is skipped
-    /// ([`Tracking::Skipped`]): in SITL, registrations on 30–80 inliers slid a hovering drone's
-    /// pose 0.2–0.75 m in a frame along a bare wall, and the drone was flown on the slid pose.
-    /// A real correction of the pose is taken a frame or two later, when the time since the
-    /// last tracked frame makes it a plausible change. `None`: not checked (a hand-held camera
-    /// moves in jerks).
-    pub max_speed_change: Option<(f64, f64)>,
     /// Each keyframe is also registered against this many earlier keyframes of its robot.
     pub recent_links: usize,
     /// Loop-closure candidates lie within this distance of the new keyframe, metres…
@@ -202,7 +193,6 @@ impl Default for SlamConfig {
             keyframe_rotation: 12f64.to_radians(),
             max_frame_translation: 0.5,
             max_frame_rotation: 45f64.to_radians(),
-            max_speed_change: Some((1.0, 4.0)),
             recent_links: 2,
             loop_radius: 2.0,
             loop_angle: 50f64.to_radians(),
@@ -367,11 +357,6 @@ pub enum Tracking {
         /// The keyframe it was registered against.
         keyframe: usize,
     },
-    /// On a vehicle: registered only where the camera would have changed its speed faster than
-    /// the vehicle can ([`SlamConfig::max_speed_change`]), which says why. The frame gets no
-    /// pose and nothing is built on it; the robot stays tracked where it was last, and the
-    /// next frame is registered from there.
-    Skipped(String),
     /// Not registered: the pose is invalid until the robot relocalises.
     Lost(String),
 }
@@ -588,9 +573,8 @@ struct Robot {
     reference: Option<usize>,
     reference_from_camera: Isometry3<f64>,
     previous: Option<Previous>,
-    /// Previous camera from current camera and the seconds between them, for the
-    /// constant-velocity prediction.
-    velocity: Option<(Isometry3<f64>, f64)>,
+    /// Previous camera from current camera, for the constant-velocity prediction.
+    velocity: Option<Isometry3<f64>>,
     nodes: Vec<usize>,
     stamp: f64,
     frames: usize,
@@ -989,8 +973,6 @@ impl Slam {
             };
             r.previous = None;
             r.velocity = None;
-        } else if let Tracking::Skipped(_) = report.tracking {
-            // Tracked where it was last: the next frame is registered from there.
         } else if let Some(n) = self.robots[k].reference {
             let r = &mut self.robots[k];
             r.lost_last = None;
@@ -1190,33 +1172,6 @@ impl Slam {
             .then(|| format!("tilted {:.0}° from the IMU's gravity", angle.to_degrees()))
     }
 
-    /// On a vehicle that is tracking, the change of the camera's velocity a pose implies, if it
-    /// is larger than [`SlamConfig::max_speed_change`] allows.
-    fn speed_change(&self, frame: &Frame, map_from_camera: &Isometry3<f64>) -> Option<String> {
-        let (slack, per_second) = self.config.max_speed_change?;
-        frame.predicted_body?;
-        let r = &self.robots[frame.robot];
-        let (previous_from_last, dt_before) = r.velocity?;
-        let &(last_t, _, _) = r.track.last()?;
-        let dt = frame.stamp - last_t;
-        if dt <= 1e-3 || dt_before <= 1e-3 {
-            return None;
-        }
-        let last_pose = self.nodes[r.reference?].pose * r.reference_from_camera;
-        // The motion into the last frame, turned into the map by the frame before it.
-        let map_from_previous = last_pose * previous_from_last.inverse();
-        let before = map_from_previous.rotation * previous_from_last.translation.vector / dt_before;
-        let now = (map_from_camera.translation.vector - last_pose.translation.vector) / dt;
-        let change = (now - before).norm();
-        let allowed = slack + per_second * dt;
-        (change > allowed).then(|| {
-            format!(
-                "changes the camera's speed by {change:.1} m/s in {dt:.2} s (at most \
-                 {allowed:.1}): skipped"
-            )
-        })
-    }
-
     /// How far (metres, radians) from the prediction a lost robot may be relocalised: within
     /// [`SlamConfig::relocalisation_gate`], narrowed to how far it can have gone since it was
     /// last placed and to the prediction's own uncertainty.
@@ -1251,7 +1206,7 @@ impl Slam {
         let last_pose = self.nodes[reference].pose * r.reference_from_camera;
         let camera_from_body = r.setup.body_from_camera.inverse();
         let predicted = if tracking {
-            Some(r.velocity.map_or(last_pose, |(v, _)| last_pose * v))
+            Some(r.velocity.map_or(last_pose, |v| last_pose * v))
         } else {
             // Lost: the caller's prediction, else where the robot was last seen, turned to the
             // heading its IMU reads now, turning or not (a hovering robot turns more than it
@@ -1273,8 +1228,6 @@ impl Slam {
         // 1. The reference keyframe, then the previous frame.
         let mut found: Option<(Option<usize>, Registration)> = None;
         let mut why = String::new();
-        // A registration was refused only for the speed change it implies.
-        let mut sudden = false;
         if tracking {
             let guess = predicted.map(|p| self.nodes[reference].pose.inverse() * p);
             match register(
@@ -1332,12 +1285,6 @@ impl Slam {
                 {
                     why = format!("registration {off}: rejected");
                     found = None;
-                } else if let Some(change) =
-                    self.speed_change(frame, &(base * reg.reference_from_frame))
-                {
-                    why = format!("registration {change}");
-                    sudden = true;
-                    found = None;
                 }
             }
         }
@@ -1388,19 +1335,11 @@ impl Slam {
                             let d = p.inverse() * pose;
                             (d.translation.vector.norm(), d.rotation.angle())
                         });
-                        let change = tracking.then(|| self.speed_change(frame, &pose)).flatten();
                         match self.implausible(frame, &pose) {
-                            None if off_t < max_t && off_r < max_r && change.is_none() => {
+                            None if off_t < max_t && off_r < max_r => {
                                 found = Some((Some(n), reg));
                                 relocalised = Some(n);
                                 break;
-                            }
-                            None if off_t < max_t && off_r < max_r => {
-                                sudden = true;
-                                add_reason(
-                                    &mut why,
-                                    format!("keyframe {n}: {}", change.unwrap_or_default()),
-                                );
                             }
                             None => add_reason(
                                 &mut why,
@@ -1423,12 +1362,6 @@ impl Slam {
             }
         }
         let Some((matched, reg)) = found else {
-            if sudden {
-                return FrameReport {
-                    tracking: Tracking::Skipped(why),
-                    ..lost(String::new())
-                };
-            }
             return lost(if why.is_empty() {
                 "no keyframe to relocalise against".into()
             } else {
@@ -1464,8 +1397,7 @@ impl Slam {
             });
         let was_lost = r.state != RobotState::Tracking;
         if !weak {
-            let since = r.track.last().map_or(0.0, |&(t, _, _)| frame.stamp - t);
-            r.velocity = (!was_lost).then(|| (last_pose.inverse() * pose, since));
+            r.velocity = (!was_lost).then(|| last_pose.inverse() * pose);
         }
         r.state = RobotState::Tracking;
         r.reference = Some(anchor);
@@ -2674,81 +2606,6 @@ mod tests {
             slam.relocalisation_gate(&frame(10.3, Some(0.05))).1,
             0.6
         ));
-    }
-
-    #[test]
-    fn a_vehicle_whose_registration_would_jump_faster_than_it_can_fly_skips_the_frame() {
-        // A vehicle's camera facing a textured wall, flying forward at 0.3 m/s, a frame every
-        // 0.1 s. Then a frame registers 0.25 m to the side, as a registration sliding along a
-        // bare wall does while the vehicle holds its course: a change of 2.5 m/s in 0.1 s.
-        let wall = textured_wall(80, &mut random_bits(5));
-        let body_from_camera = forward_camera();
-        let start = Isometry3::new(Vector3::new(0.0, 0.0, 0.9), Vector3::zeros());
-        let at = |t: f64| start * Isometry3::translation(0.3 * t, 0.0, 0.0);
-        let view = |body: &Isometry3<f64>| Arc::new(seen(&wall, &(body * body_from_camera)));
-        // Frames seen from `last` at 0.4 s and from `then` at 0.5 s, after three on course:
-        // how each was tracked, and where the camera was put at the end.
-        let run = |vehicle: bool, last: Isometry3<f64>, then: Isometry3<f64>| {
-            let mut slam = Slam::new(
-                SlamConfig::default(),
-                vec![RobotSetup {
-                    body_from_camera,
-                    start: Some(start),
-                }],
-            );
-            let frame = |t: f64, body: &Isometry3<f64>| Frame {
-                heading: Some(0.0),
-                predicted_body: vehicle.then_some(*body),
-                ..bare_frame(t)
-            };
-            assert_eq!(
-                slam.start(&frame(0.0, &start), view(&start)).tracking,
-                Tracking::Started
-            );
-            slam.robots[0].track.push((0.0, 0, Isometry3::identity()));
-            let mut step = |t: f64, seen_from: Isometry3<f64>| {
-                let report = slam.track(&frame(t, &at(t)), view(&seen_from));
-                // What `process` does with a frame that is tracked.
-                let r = &mut slam.robots[0];
-                if let (Tracking::Tracked { .. }, Some(n)) = (&report.tracking, r.reference) {
-                    r.track.push((t, n, r.reference_from_camera));
-                }
-                report.tracking
-            };
-            for i in 1..=3 {
-                let t = f64::from(i) * 0.1;
-                assert!(matches!(step(t, at(t)), Tracking::Tracked { .. }));
-            }
-            let tracked = [step(0.4, last), step(0.5, then)];
-            let camera = slam.estimate(0).and_then(|e| e.map_from_camera());
-            (
-                tracked,
-                camera.expect("a pose") * body_from_camera.inverse(),
-            )
-        };
-        let aside = |t: f64, by: f64| at(t) * Isometry3::translation(0.0, by, 0.0);
-        let off =
-            |a: &Isometry3<f64>, b: &Isometry3<f64>| (a.inverse() * b).translation.vector.norm();
-        // The slide is skipped; the vehicle stays tracked on course.
-        let ([slid, next], body) = run(true, aside(0.4, 0.25), at(0.5));
-        let Tracking::Skipped(why) = slid else {
-            panic!("a vehicle tracked on a jump of 2.5 m/s in 0.1 s: {slid:?}");
-        };
-        assert!(why.contains("speed by 2.5 m/s in 0.10 s"), "{why}");
-        assert!(matches!(next, Tracking::Tracked { .. }), "{next:?}");
-        assert!(off(&body, &at(0.5)) < 0.01, "{body}");
-        // Where the camera really is 0.25 m aside (a correction of the pose), it is taken a
-        // frame later: 0.25 m in 0.2 s is a change the vehicle can make.
-        let ([first, second], body) = run(true, aside(0.4, 0.25), aside(0.5, 0.25));
-        assert!(matches!(first, Tracking::Skipped(_)), "{first:?}");
-        assert!(matches!(second, Tracking::Tracked { .. }), "{second:?}");
-        assert!(off(&body, &aside(0.5, 0.25)) < 0.01, "{body}");
-        // A turn of speed it can make (0.8 m/s in 0.1 s) is tracked.
-        let ([swerve, _], _) = run(true, aside(0.4, 0.08), aside(0.5, 0.11));
-        assert!(matches!(swerve, Tracking::Tracked { .. }), "{swerve:?}");
-        // A hand-held camera (no prediction) moves in jerks: the jump is tracked.
-        let ([jerk, _], _) = run(false, aside(0.4, 0.25), aside(0.5, 0.25));
-        assert!(matches!(jerk, Tracking::Tracked { .. }), "{jerk:?}");
     }
 
     #[test]

@@ -212,10 +212,8 @@ pub struct SlamFix {
     /// camera sees: few, and the next frame may be lost, and its pose counts for less);
     /// `None` when relocalised, lost or placed at a known pose.
     pub inliers: Option<usize>,
-    /// The frame gives no pose to fly on, though the SLAM still tracks the drone: a weak
-    /// registration away from the motion so far ([`Tracking::Weak`]), or a frame skipped as a
-    /// change of speed the drone cannot make ([`Tracking::Skipped`]). The drone is not flown on
-    /// it (nor taken for lost).
+    /// The pose is a weak registration away from the motion so far ([`Tracking::Weak`]): the
+    /// drone is not flown on it (nor taken for lost).
     pub weak: bool,
     /// While lost: how the body moved since the drone's previous frame (visual odometry).
     pub odometry: Option<Odometry>,
@@ -422,9 +420,6 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
             Tracking::Weak { inliers } => {
                 tracing::debug!(drone = k + 1, stamp = f.stamp, inliers, "weak registration");
             }
-            Tracking::Skipped(why) => {
-                tracing::debug!(drone = k + 1, stamp = f.stamp, "frame skipped: {why}");
-            }
             _ => {}
         }
         if let Some(t) = f.truth {
@@ -433,11 +428,8 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
                 pose: t,
             });
         }
-        let skipped = matches!(report.tracking, Tracking::Skipped(_));
         let estimate = slam.estimate(k);
-        if let Some(pose) = estimate.as_ref().and_then(RobotEstimate::map_from_camera)
-            && !skipped
-        {
+        if let Some(pose) = estimate.as_ref().and_then(RobotEstimate::map_from_camera) {
             online[k].push(Stamped { t: f.stamp, pose });
         }
         let _ = fixes.send(SlamFix {
@@ -449,7 +441,7 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
                 Tracking::Tracked { inliers } | Tracking::Weak { inliers } => Some(inliers),
                 _ => None,
             },
-            weak: skipped || matches!(report.tracking, Tracking::Weak { .. }),
+            weak: matches!(report.tracking, Tracking::Weak { .. }),
             odometry: report.odometry,
             half_fov_rad: f.frame.intrinsics.half_fov_x(f.frame.width),
             ranges,
