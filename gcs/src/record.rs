@@ -128,6 +128,10 @@ pub struct DroneState {
     /// logs, and when none is near.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub nearest_wall_m: Option<f64>,
+    /// Where the position controller pulled it (x, y, map frame: its path's carrot or the spot
+    /// it holds, kept off the walls), while it flew on a pose; absent from older logs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub setpoint: Option<[f64; 2]>,
 }
 
 /// One exploring drone in a planner decision, as written on `/plan` (`drone` 1-based there).
@@ -194,6 +198,8 @@ pub enum Record {
         tilt: Option<[f64; 2]>,
         /// The nearest wall it keeps in mind ([`nav::proximity::Proximity::nearest`]), metres.
         nearest_wall_m: Option<f64>,
+        /// Where the position controller pulled it, while it flew on a pose.
+        setpoint: Option<[f64; 2]>,
         /// Its phase.
         phase: &'static str,
     },
@@ -652,6 +658,7 @@ fn write_record(w: &mut McapWriter, ch: &mut Channels, r: &Record) -> Result<u64
             pose_sigma_m,
             tilt,
             nearest_wall_m,
+            setpoint,
             phase,
         } => {
             let k = drone + 1;
@@ -671,6 +678,7 @@ fn write_record(w: &mut McapWriter, ch: &mut Channels, r: &Record) -> Result<u64
                 pose_sigma_m: *pose_sigma_m,
                 tilt: *tilt,
                 nearest_wall_m: *nearest_wall_m,
+                setpoint: *setpoint,
             };
             let c = ch.json(w, &format!("/drone{k}/state"), "gcs.DroneState")?;
             ch.write(
@@ -945,18 +953,19 @@ mod tests {
     }
 
     #[test]
-    fn drone_states_carry_the_filters_tilt_sigma_and_nearest_wall_and_older_ones_read_without_them()
-    {
+    fn drone_states_carry_the_filters_tilt_sigma_nearest_wall_and_setpoint_and_older_ones_read_without_them()
+     {
         let older = r#"{"t":1.5,"phase":"exploring","height_m":0.9,"yaw_rad":0.1,
             "attitude":[0.01,0.02,0.1],"battery_v":12.1,"battery_pct":80,"armed":true,
             "mode":"ALT_HOLD","sticks":[0,0,0,0],"pose":[1,2,0.9,0.1]}"#;
         let s: DroneState = serde_json::from_str(older).expect("an older state");
         assert_eq!((s.t, s.tilt, s.pose_sigma_m), (1.5, None, None));
-        assert_eq!(s.nearest_wall_m, None);
+        assert_eq!((s.nearest_wall_m, s.setpoint), (None, None));
         let now = DroneState {
             tilt: Some([0.03, -0.04]),
             pose_sigma_m: Some(0.04),
             nearest_wall_m: Some(0.55),
+            setpoint: Some([1.2, 2.1]),
             ..s
         };
         let json = serde_json::to_string(&now).expect("json");

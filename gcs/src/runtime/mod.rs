@@ -712,6 +712,7 @@ impl Mission {
                     pose_sigma_m,
                     tilt,
                     nearest_wall_m: d.nearest_wall(now, &self.config.drone),
+                    setpoint: d.flown_setpoint(),
                     phase: d.phase.name(),
                 });
             }
