@@ -226,6 +226,8 @@ pub struct PositionController {
     reference: Option<Reference>,
     /// …and the latest update, to be that once it is old enough.
     recent: Option<Reference>,
+    /// The next update's setpoint is a new target ([`PositionController::target_jumps`]).
+    jumps: bool,
 }
 
 impl PositionController {
@@ -238,7 +240,17 @@ impl PositionController {
             yaw: Pid::new(gains.yaw),
             reference: None,
             recent: None,
+            jumps: false,
         }
+    }
+
+    /// The next update's setpoint is a new target (a new path's carrot, a new spot to hold),
+    /// whatever the distance: the derivative terms take it as having moved along with the
+    /// drone, as they take a jump they see ([`SETPOINT_JUMP_M`]). A carrot that moved a few
+    /// centimetres sideways with a new path, differenced, read as half a metre a second and
+    /// kicked the sticks by 0.3–0.5 for a tick, once a second.
+    pub fn target_jumps(&mut self) {
+        self.jumps = true;
     }
 
     /// Resets every loop.
@@ -247,17 +259,21 @@ impl PositionController {
             p.reset();
         }
         (self.reference, self.recent) = (None, None);
+        self.jumps = false;
     }
 
     /// One update. The x and y loops run on the map-frame errors, and their outputs are rotated
     /// into the body frame by the current heading (so turning does not look like motion to the
     /// derivative terms); the heading error is wrapped, so −179.9° to 179.9° is a 0.2° turn.
     ///
-    /// The derivative terms see a setpoint that jumped ([`SETPOINT_JUMP_M`]: a new target,
-    /// not one moving along with the drone) as standing still, so they brake the drone's own
-    /// motion rather than kick the sticks. (A setpoint that jumped 0.26 m from a turn's hold
-    /// point to the carrot, differenced, had pushed a drone at 0.69 of full stick for 0.2 s
-    /// away from both, toward a door's jamb.) They difference over at least
+    /// The derivative terms take a setpoint that jumped ([`SETPOINT_JUMP_M`], or announced by
+    /// [`PositionController::target_jumps`]: a new target, not one moving along with the
+    /// drone) as having moved with the drone, so it neither kicks nor brakes the sticks: from
+    /// the next update they follow the new target's own motion (a spot to hold stands still:
+    /// they brake the drone). (A setpoint that jumped 0.26 m from a turn's hold point to the
+    /// carrot, differenced, had pushed a drone at 0.69 of full stick for 0.2 s away from both,
+    /// toward a door's jamb; taken as standing still, a carrot that jumped braked a drone
+    /// cruising at 0.9 m/s by half a stick for a tick.) They difference over at least
     /// [`DERIVATIVE_WINDOW_S`], however close together the updates come.
     pub fn update(&mut self, setpoint: &Pose3, estimate: &Pose3, dt: f64) -> StickCommand {
         self.update_steered(setpoint, [setpoint.x, setpoint.y], estimate, dt)
@@ -292,13 +308,24 @@ impl PositionController {
         if self.recent.is_some_and(|r| r.age >= DERIVATIVE_WINDOW_S) {
             self.reference = self.recent;
         }
+        let announced = std::mem::take(&mut self.jumps);
         let rate = match self.reference {
             Some(from) if dt > 0.0 => {
                 let span = from.age;
                 let led = [target[0] - from.target[0], target[1] - from.target[1]];
                 let moved = [here[0] - from.here[0], here[1] - from.here[1]];
-                if (led[0] - moved[0]).hypot(led[1] - moved[1]) > SETPOINT_JUMP_M {
-                    [-moved[0] / span, -moved[1] / span]
+                if announced || (led[0] - moved[0]).hypot(led[1] - moved[1]) > SETPOINT_JUMP_M {
+                    // As if the new target had always moved with the drone.
+                    for r in [&mut self.reference, &mut self.recent]
+                        .into_iter()
+                        .flatten()
+                    {
+                        r.target = [
+                            target[0] - (here[0] - r.here[0]),
+                            target[1] - (here[1] - r.here[1]),
+                        ];
+                    }
+                    [0.0; 2]
                 } else {
                     [(led[0] - moved[0]) / span, (led[1] - moved[1]) / span]
                 }
@@ -498,7 +525,8 @@ mod tests {
         let s = pc.update(&near, &est, 0.1);
         assert!(s.pitch > 0.0 && s.roll.abs() < 1e-9, "{s:?}");
         // Moving on at 0.5 m/s toward a target that jumps 0.5 m further: the derivative
-        // brakes that motion (PD 0.3, 0.6: 0.3 × 1.45 − 0.6 × 0.5), not the jump's 4.5 m/s.
+        // neither kicks (the jump's 4.5 m/s) nor brakes (0.5 m/s) for it: PD 0.3, 0.6 gives
+        // only the proportional 0.3 × 1.45.
         let pd = PidGains::pid(0.3, 0.0, 0.6);
         let mut pc = PositionController::new(PositionGains {
             x: pd,
@@ -508,7 +536,47 @@ mod tests {
         pc.update(&far, &est, 0.1);
         let moved = Pose3 { x: 0.05, ..est };
         let s = pc.update(&Pose3 { x: 1.5, ..est }, &moved, 0.1);
-        assert!((s.pitch - (0.3 * 1.45 - 0.6 * 0.5)).abs() < 1e-9, "{s:?}");
+        assert!((s.pitch - 0.3 * 1.45).abs() < 1e-9, "{s:?}");
+    }
+
+    #[test]
+    fn a_new_target_a_few_centimetres_off_kicks_nothing_then_its_motion_is_followed() {
+        // Cruising +x at 0.5 m/s behind a carrot 0.4 m ahead that moves with it (ticks of
+        // 0.1 s); a new path puts the carrot 8 cm to the left, too little to be seen as a jump.
+        let pd = PidGains::pid(0.3, 0.0, 0.6);
+        let gains = PositionGains {
+            x: pd,
+            y: pd,
+            ..PositionGains::default()
+        };
+        let at = |x: f64, y: f64| Pose3 {
+            x,
+            y,
+            z: 1.0,
+            yaw: 0.0,
+        };
+        let roll_after_the_new_path = |announced: bool| {
+            let mut pc = PositionController::new(gains);
+            for i in 0..5 {
+                let x = 0.05 * f64::from(i);
+                let s = pc.update(&at(x + 0.4, 0.0), &at(x, 0.0), 0.1);
+                assert!(s.roll.abs() < 1e-9, "{s:?}");
+            }
+            if announced {
+                pc.target_jumps();
+            }
+            let jump = pc.update(&at(0.25 + 0.4, 0.08), &at(0.25, 0.0), 0.1).roll;
+            // The next tick: the carrot moves with the drone again; the drone drifts 1 cm left.
+            let next = pc.update(&at(0.3 + 0.4, 0.08), &at(0.3, 0.01), 0.1).roll;
+            (jump, next)
+        };
+        // Differenced, 0.8 m/s to the left: a kick of 0.6 × 0.8 on top of the 0.3 × 0.08.
+        let (kicked, _) = roll_after_the_new_path(false);
+        assert!((kicked + (0.3 * 0.08 + 0.6 * 0.8)).abs() < 1e-9, "{kicked}");
+        // Announced: only the proportional term; then the drift is damped as ever.
+        let (jump, next) = roll_after_the_new_path(true);
+        assert!((jump + 0.3 * 0.08).abs() < 1e-9, "{jump}");
+        assert!((next + (0.3 * 0.07 - 0.6 * 0.1)).abs() < 1e-9, "{next}");
     }
 
     #[test]

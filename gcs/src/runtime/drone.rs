@@ -283,6 +283,14 @@ impl Default for BatterySwap {
     }
 }
 
+/// What the position controller flies to: the carrot of one of the drone's paths (counted),
+/// or a spot held.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Target {
+    Path(u64),
+    Hold([f64; 2]),
+}
+
 /// Roll and pitch sticks that brake a drone moving at `velocity` (map frame, m/s) while it
 /// heads `yaw` (radians): proportional, limited, and none for a speed within the band.
 fn brake(velocity: [f64; 2], yaw: f64, config: &DroneConfig) -> [f32; 2] {
@@ -389,6 +397,10 @@ pub struct Drone {
     hold: [f64; 2],
     /// Pursuing a carrot along a path this tick (not holding still).
     tracking: bool,
+    /// Paths given to the follower so far…
+    paths: u64,
+    /// …and what the position controller flew to last tick.
+    flown: Option<Target>,
     /// Turning on the spot toward the path (holding where the turn began).
     turning: bool,
     /// Where the position controller pulled it last: `hold` kept off the walls.
@@ -499,6 +511,8 @@ impl Drone {
             scan: None,
             hold: [x, y],
             tracking: false,
+            paths: 0,
+            flown: None,
             turning: false,
             setpoint: [x, y],
             map: None,
@@ -675,7 +689,7 @@ impl Drone {
             return;
         }
         self.set_sticks(Sticks::CENTRED);
-        self.follower.set_path(vec![]);
+        self.set_path(vec![]);
         self.goal = None;
         self.phase = Phase::Landing;
         self.landing_since = None;
@@ -693,7 +707,7 @@ impl Drone {
                 self.say(format!("{why}: returning to its start"));
                 self.phase = Phase::Returning;
                 self.goal = Some([x, y]);
-                self.follower.set_path(vec![]);
+                self.set_path(vec![]);
                 self.scan = None;
             }
             None => {
@@ -712,7 +726,7 @@ impl Drone {
         self.hold = [e.position[0], e.position[1]];
         self.height_goal = height;
         self.yaw_goal = yaw;
-        self.follower.set_path(vec![]);
+        self.set_path(vec![]);
         self.goal = None;
         self.scan = None;
         self.phase = Phase::Holding;
@@ -769,7 +783,7 @@ impl Drone {
         }
         self.goal = goal;
         self.look_turn = look_turn;
-        self.follower.set_path(path);
+        self.set_path(path);
     }
 
     /// The charge at which it turns home from where it is, percent, while it explores
@@ -792,7 +806,7 @@ impl Drone {
     /// A path home (returning drones only).
     pub fn set_home_path(&mut self, path: Vec<[f64; 2]>) {
         if self.phase == Phase::Returning {
-            self.follower.set_path(path);
+            self.set_path(path);
         }
     }
 
@@ -1024,7 +1038,7 @@ impl Drone {
                 self.lost_in = Some(self.phase);
                 self.phase = Phase::LinkLost;
                 self.goal = None;
-                self.follower.set_path(vec![]);
+                self.set_path(vec![]);
             }
             return None;
         }
@@ -1061,7 +1075,7 @@ impl Drone {
                 self.set_sticks(Sticks::CENTRED); // no stick may reposition it
                 self.phase = Phase::Landing;
                 self.goal = None;
-                self.follower.set_path(vec![]);
+                self.set_path(vec![]);
                 self.landing_since = Some(now);
             } else if telemetry.armed == Some(false) {
                 let since = *self.disarmed_since.get_or_insert(now);
@@ -1071,7 +1085,7 @@ impl Drone {
                     self.disarmed_since = None;
                     self.phase = Phase::Landed;
                     self.goal = None;
-                    self.follower.set_path(vec![]);
+                    self.set_path(vec![]);
                     self.link.set_sticks(None);
                     self.sticks = None;
                     return None;
@@ -1237,6 +1251,15 @@ impl Drone {
             z: pose[2],
             yaw: pose[3],
         };
+        // Another path's carrot or another spot to hold: a new target, not one moving.
+        let target = if self.tracking {
+            Target::Path(self.paths)
+        } else {
+            Target::Hold(self.hold)
+        };
+        if self.flown.replace(target).is_some_and(|was| was != target) {
+            self.controller.target_jumps();
+        }
         let mut c = self
             .controller
             .update_steered(&setpoint, self.setpoint, &estimate, dt);
@@ -1379,6 +1402,12 @@ impl Drone {
             .map_or(spot, |map| open_spot(map, spot, &config.keep_clear))
     }
 
+    /// A path for the follower (empty: none).
+    fn set_path(&mut self, path: Vec<[f64; 2]>) {
+        self.paths += 1;
+        self.follower.set_path(path);
+    }
+
     fn follow(&mut self, pose: [f64; 4], config: &DroneConfig) -> Follow {
         let f = self.follower.step(Some(Pose2 {
             x: pose[0],
@@ -1482,7 +1511,7 @@ impl Drone {
             });
         }
         if let Follow::Arrived = self.follow(pose, config) {
-            self.follower.set_path(vec![]);
+            self.set_path(vec![]);
             let goal = self.goal.take();
             let mut scan = self.look_around(now, pose, goal, config);
             if let Some(turn) = self.look_turn.take() {
@@ -1502,7 +1531,7 @@ impl Drone {
                 "no progress for {} s: giving up its goal",
                 config.stuck_s
             );
-            self.follower.set_path(vec![]);
+            self.set_path(vec![]);
             self.progress = (now, here);
             return self.goal.take().map(DroneEvent::GiveUp);
         }
@@ -1934,6 +1963,36 @@ mod tests {
         // more.
         let (braked, not) = (last_roll(&config), last_roll(&unbraked));
         assert!(braked > not + 0.05, "braked {braked}, not {not}");
+    }
+
+    #[test]
+    fn a_new_path_a_few_centimetres_aside_does_not_kick_the_sticks() {
+        let config = DroneConfig::default();
+        let mut drone = exploring_drone(Arc::default(), &config);
+        drone.set_plan(Some([5.0, 0.0]), vec![[0.0, 0.0], [5.0, 0.0]], None, 0.0);
+        // Cruising east along y = 0 at 0.5 m/s.
+        let mut t = 0.0;
+        let mut roll = 0.0;
+        for _ in 0..10 {
+            t += 0.1;
+            drone.slam_fix(t, [0.5 * t, 0.0, 0.9], 0.0, None, false);
+            drone.tick(t, &config);
+            roll = drone.sticks.expect("sticks").roll;
+            assert!(drone.tracking);
+        }
+        assert!(roll.abs() < 0.02, "{roll}");
+        // The planner's next path, 8 cm to the left: differenced, the carrot's step would read
+        // 0.8 m/s and roll the drone left by half a stick for a tick.
+        drone.set_plan(Some([5.0, 0.08]), vec![[0.4, 0.08], [5.0, 0.08]], None, t);
+        t += 0.1;
+        drone.slam_fix(t, [0.5 * t, 0.0, 0.9], 0.0, None, false);
+        drone.tick(t, &config);
+        let s = drone.sticks.expect("sticks");
+        let p = config.gains.y.kp * 0.08;
+        assert!(
+            s.roll < 0.0 && s.roll > -(p + 0.02) as f32,
+            "a lean left of about {p}: {s:?}"
+        );
     }
 
     #[test]
