@@ -15,7 +15,6 @@
 //! still stop short of it.
 
 use crate::grid::{Cell, Grid};
-use crate::search::line_of_sight;
 
 /// How far to keep off the walls.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -35,11 +34,6 @@ pub struct KeepClear {
     pub brake_gain: f64,
     /// …up to this much stick.
     pub brake_max: f64,
-    /// [`open_spot`]: a drone turns on the spot (a look around, a bend, lost) this far from
-    /// every wall (centre to wall) where it can, metres…
-    pub turn_clearance_m: f64,
-    /// …moving at most this far for it, metres.
-    pub turn_reach_m: f64,
 }
 
 impl Default for KeepClear {
@@ -56,10 +50,6 @@ impl Default for KeepClear {
             approach_per_s: 1.5,
             brake_gain: 0.6,
             brake_max: 0.3,
-            // A turning drone's SLAM pose was 0.15–0.2 m off in collisions: 0.3 m to spare
-            // then. A door 1 m wide is as open as it gets in its middle.
-            turn_clearance_m: 0.5,
-            turn_reach_m: 0.3,
         }
     }
 }
@@ -165,56 +155,6 @@ pub fn brake_toward_walls(
         ];
     }
     push
-}
-
-/// Where a drone that is to turn on the spot at `spot` (map frame, metres) had better turn: the
-/// nearest point within `turn_reach_m` of it, in line of sight over known free cells, that is
-/// `turn_clearance_m` from every wall the map knows, or, where none is, the one farthest from
-/// the walls. `spot` itself when it is that far already, or when nothing in reach is farther
-/// by a centimetre; also on a map that does not know `spot` as free.
-///
-/// A drone turning on the spot (a look around at its goal, a turn at a bend of its path, a
-/// lost drone turning back to its last view) is where its SLAM pose is at its worst: the
-/// camera's view changes fastest. Collisions came from drones that turned 0.25–0.3 m from a
-/// door's jamb on a pose 0.1–0.2 m off; [`keep_clear`]'s clearance is sized for a good pose.
-pub fn open_spot(map: &Grid, spot: [f64; 2], keep: &KeepClear) -> [f64; 2] {
-    let want = keep.turn_clearance_m;
-    let (Some(from), true) = (map.cell_of(spot), want > 0.0 && keep.turn_reach_m > 0.0) else {
-        return spot;
-    };
-    if map.get(from) != Cell::Free {
-        return spot;
-    }
-    // How far from the walls, up to `want`, in whole centimetres (ties go to the nearest).
-    let room = |p: [f64; 2]| {
-        let nearest = walls_near(map, p, want)
-            .into_iter()
-            .map(|(_, d)| d)
-            .fold(want, f64::min);
-        (nearest * 100.0).floor() as i64
-    };
-    let here = room(spot);
-    if here >= (want * 100.0).floor() as i64 {
-        return spot;
-    }
-    let reach = (keep.turn_reach_m / map.resolution()).ceil() as usize;
-    let (x0, y0) = from;
-    let mut best: Option<(i64, f64, [f64; 2])> = None;
-    for y in y0.saturating_sub(reach)..(y0 + reach + 1).min(map.height()) {
-        for x in x0.saturating_sub(reach)..(x0 + reach + 1).min(map.width()) {
-            let c = map.center_of((x, y));
-            let away = (c[0] - spot[0]).hypot(c[1] - spot[1]);
-            if away > keep.turn_reach_m || map.get((x, y)) != Cell::Free {
-                continue;
-            }
-            let r = room(c);
-            let better = best.is_none_or(|(br, ba, _)| r > br || (r == br && away < ba));
-            if r > here && better && line_of_sight(map, from, (x, y)) {
-                best = Some((r, away, c));
-            }
-        }
-    }
-    best.map_or(spot, |(_, _, c)| c)
 }
 
 /// The nearest wall point on each side of the drone: the intrusions deepest first, each kept
@@ -451,69 +391,5 @@ mod tests {
         // 1 cm into the wall's 5 cm: out on the near side, to the clearance.
         let s = keep_clear(&g, [2.01, 2.0], [2.01, 2.0], &clearance(0.35));
         assert!(s[0] < 2.0 - 0.3, "{s:?}");
-    }
-
-    /// The distance from `p` to the nearest wall of `map`, up to 1 m.
-    fn room(map: &Grid, p: [f64; 2]) -> f64 {
-        walls_near(map, p, 1.0)
-            .into_iter()
-            .map(|(_, d)| d)
-            .fold(1.0, f64::min)
-    }
-
-    #[test]
-    fn a_drone_turns_on_the_spot_out_of_a_walls_reach() {
-        let keep = KeepClear::default();
-        let g = wall_east(4.0);
-        // 0.25 m from the wall's face: the nearest spot 0.5 m from it, straight back.
-        let spot = [1.75, 2.0];
-        let open = open_spot(&g, spot, &keep);
-        let moved = (open[0] - spot[0]).hypot(open[1] - spot[1]);
-        assert!(room(&g, open) >= keep.turn_clearance_m, "{open:?}");
-        assert!(moved <= 0.3 && open[0] < spot[0], "{open:?}");
-        assert!((open[1] - spot[1]).abs() <= 0.025 + 1e-9, "{open:?}");
-        // Open enough already, unknown to the map, off it, or asked for nothing: it stays.
-        assert_eq!(open_spot(&g, [1.4, 2.0], &keep), [1.4, 2.0]);
-        let unknown = Grid::new(80, 80, 0.05, [0.0, 0.0], Cell::Unknown);
-        assert_eq!(open_spot(&unknown, spot, &keep), spot);
-        assert_eq!(open_spot(&g, [-1.0, 2.0], &keep), [-1.0, 2.0]);
-        let none = KeepClear {
-            turn_reach_m: 0.0,
-            ..keep
-        };
-        assert_eq!(open_spot(&g, spot, &none), spot);
-    }
-
-    #[test]
-    fn a_spot_with_no_open_room_in_reach_goes_as_far_from_the_walls_as_it_can() {
-        let keep = KeepClear::default();
-        // In a door 0.8 m wide, 0.15 m from its south jamb: no spot in reach is 0.5 m from
-        // every wall, so the roomiest, toward the door's middle or out of it.
-        let g = wall_with_a_door();
-        let spot = [2.025, 1.75];
-        let open = open_spot(&g, spot, &keep);
-        assert!(room(&g, open) >= room(&g, spot) + 0.15, "{open:?}");
-        assert!(
-            (open[0] - spot[0]).hypot(open[1] - spot[1]) <= 0.3,
-            "{open:?}"
-        );
-    }
-
-    #[test]
-    fn a_drone_is_never_sent_through_a_wall_for_room_to_turn() {
-        // A corridor 0.6 m wide west of the wall at x = 2.0 (its west wall at x = 1.35–1.4),
-        // open space east of it: the room 0.7 m away through the wall is out of sight.
-        let mut g = wall_east(4.0);
-        for y in 0..80 {
-            g.set((27, y), Cell::Occupied);
-        }
-        let keep = KeepClear {
-            turn_reach_m: 0.8,
-            ..KeepClear::default()
-        };
-        let open = open_spot(&g, [1.85, 1.0], &keep);
-        assert!(open[0] < 2.0, "through the wall: {open:?}");
-        // The corridor's middle, 0.3 m from either side.
-        assert!((open[0] - 1.7).abs() <= 0.03, "{open:?}");
     }
 }

@@ -9,7 +9,7 @@ use std::time::Duration;
 use link::{Command, CommandError, FlightMode, LinkState, Sticks, Telemetry, VehicleLink};
 use nalgebra::Isometry3;
 use nav::Grid;
-use nav::avoid::{KeepClear, brake_toward_walls, keep_clear, open_spot};
+use nav::avoid::{KeepClear, brake_toward_walls, keep_clear};
 use nav::control::{PidGains, Pose3, PositionController, PositionGains};
 use nav::local::{Follow, FollowerConfig, PathFollower, Pose2, wrap_angle};
 use nav::mission::SAME_FRONTIER_M;
@@ -963,8 +963,6 @@ impl Drone {
             Some(k) if (k[0] - p[0]).hypot(k[1] - p[1]) <= config.lost_back_m => k,
             _ => [p[0], p[1]],
         });
-        // It turns there, back to its last view, then round.
-        self.lost_at = self.lost_at.map(|at| self.turn_spot(at, config));
     }
 
     /// Visual odometry while lost: the body moved `previous_from_body` between its frames at
@@ -1219,7 +1217,7 @@ impl Drone {
                     self.land();
                     return None;
                 }
-                self.follow(pose, config);
+                self.follow(pose);
             }
             Phase::Holding => {}
             _ => return None,
@@ -1394,21 +1392,13 @@ impl Drone {
         self.proximity.nearest(now, &config.proximity)
     }
 
-    /// Where to turn on the spot near `spot`: off the walls of its map, where its pose, at
-    /// its worst turning, cannot take it into one ([`open_spot`]).
-    fn turn_spot(&self, spot: [f64; 2], config: &DroneConfig) -> [f64; 2] {
-        self.map
-            .as_deref()
-            .map_or(spot, |map| open_spot(map, spot, &config.keep_clear))
-    }
-
     /// A path for the follower (empty: none).
     fn set_path(&mut self, path: Vec<[f64; 2]>) {
         self.paths += 1;
         self.follower.set_path(path);
     }
 
-    fn follow(&mut self, pose: [f64; 4], config: &DroneConfig) -> Follow {
+    fn follow(&mut self, pose: [f64; 4]) -> Follow {
         let f = self.follower.step(Some(Pose2 {
             x: pose[0],
             y: pose[1],
@@ -1419,7 +1409,7 @@ impl Drone {
                 // Hold where the turn began: a spot that slid along the path with the drone
                 // would let it coast on through the turn (into a door's jamb).
                 if !self.turning {
-                    self.hold = self.turn_spot(at, config);
+                    self.hold = at;
                 }
                 self.turning = true;
                 self.yaw_goal = yaw;
@@ -1510,7 +1500,7 @@ impl Drone {
                 }
             });
         }
-        if let Follow::Arrived = self.follow(pose, config) {
+        if let Follow::Arrived = self.follow(pose) {
             self.set_path(vec![]);
             let goal = self.goal.take();
             let mut scan = self.look_around(now, pose, goal, config);
@@ -1522,7 +1512,7 @@ impl Drone {
                 scan.direction = turn;
             }
             self.scan = Some(scan);
-            self.hold = self.turn_spot(here, config);
+            self.hold = here;
             return None;
         }
         if self.goal.is_some() && now - self.progress.0 > config.stuck_s {
@@ -1863,39 +1853,6 @@ mod tests {
             "out to {} m from the wall: {setpoint:?}",
             config.keep_clear.clearance_m
         );
-    }
-
-    #[test]
-    fn a_drone_at_its_goal_beside_a_wall_looks_around_out_of_its_reach() {
-        let config = DroneConfig::default();
-        // Its goal 0.25 m from a wall's face (x = 0.75 m), facing it.
-        let mut map = Grid::new(80, 40, 0.05, [-1.0, -1.0], nav::Cell::Free);
-        for y in 0..40 {
-            map.set((35, y), nav::Cell::Occupied); // x = 0.75–0.80
-        }
-        let mut drone = exploring_drone(Arc::default(), &config);
-        drone.set_map(Arc::new(map));
-        drone.set_plan(Some([0.5, 0.0]), vec![[0.0, 0.0], [0.5, 0.0]], None, 0.0);
-        let mut t = 0.0;
-        while drone.scan.is_none() {
-            t += 0.1;
-            drone.slam_fix(t, [0.5, 0.0, 0.9], 0.0, None, false);
-            drone.tick(t, &config);
-            assert!(t < 2.0, "at its goal, it looks around");
-        }
-        // It turns 0.5 m from the wall, backing off to it.
-        let face = 0.75;
-        assert!(
-            face - drone.hold[0] >= config.keep_clear.turn_clearance_m,
-            "{:?}",
-            drone.hold
-        );
-        assert!(drone.hold[1].abs() <= 0.025 + 1e-9, "{:?}", drone.hold);
-        t += 0.1;
-        drone.slam_fix(t, [0.5, 0.0, 0.9], 0.0, None, false);
-        drone.tick(t, &config);
-        let s = drone.sticks.expect("sticks");
-        assert!(s.pitch < 0.0, "backing off the wall: {s:?}");
     }
 
     #[test]
