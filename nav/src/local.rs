@@ -152,57 +152,6 @@ impl Default for FollowerConfig {
     }
 }
 
-/// How fast a drone may fly toward a bend of its path: a drone that flies on through a bend
-/// while it turns ([`FollowerConfig::turn_threshold_rad`]) carries its speed across it, and at
-/// a door off a corridor that is into the door's far jamb (Nav2's regulated pure pursuit slows
-/// on a path's curvature for the same reason).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct BendSpeed {
-    /// A bend is where the path turns by more than this from the way the drone flies, radians…
-    pub min_turn_rad: f64,
-    /// …looked for this far ahead along the path, metres.
-    pub within_m: f64,
-    /// At the bend the drone flies at most this fast, m/s…
-    pub at_bend_mps: f64,
-    /// …and this many m/s faster per metre before it, 1/s…
-    pub approach_per_s: f64,
-    /// …any faster is braked with this much stick per m/s…
-    pub brake_gain: f64,
-    /// …up to this much stick.
-    pub brake_max: f64,
-}
-
-impl Default for BendSpeed {
-    /// For the simulated drone: 0.3 m/s at a bend of more than 40°, 0.9 m/s (its cruise in a
-    /// corridor) 0.6 m before it. Braking from 0.9 m/s takes about 0.3 m.
-    fn default() -> Self {
-        Self {
-            min_turn_rad: 40f64.to_radians(),
-            within_m: 1.5,
-            at_bend_mps: 0.3,
-            approach_per_s: 1.0,
-            brake_gain: 0.6,
-            brake_max: 0.3,
-        }
-    }
-}
-
-impl BendSpeed {
-    /// The stick push (map frame x, y; rotate it into the body frame) that brakes a drone
-    /// moving at `velocity` (m/s) `distance_m` before a bend, when it is faster than it may
-    /// be there: against its motion, by `brake_gain` per m/s of the excess, at most
-    /// `brake_max`. None when slow enough.
-    pub fn brake(&self, velocity: [f64; 2], distance_m: f64) -> [f64; 2] {
-        let speed = velocity[0].hypot(velocity[1]);
-        let limit = self.at_bend_mps + self.approach_per_s * distance_m.max(0.0);
-        if !(speed.is_finite() && speed > limit && self.brake_gain > 0.0) {
-            return [0.0; 2];
-        }
-        let stick = (self.brake_gain * (speed - limit)).min(self.brake_max);
-        [-velocity[0] / speed * stick, -velocity[1] / speed * stick]
-    }
-}
-
 /// What the path follower asks of the position controller this tick.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Follow {
@@ -257,37 +206,6 @@ impl PathFollower {
     /// The path being followed.
     pub fn path(&self) -> &[[f64; 2]] {
         &self.path
-    }
-
-    /// The next bend of the path ahead of a drone at `position` on the segment it follows (as
-    /// of the last [`PathFollower::step`]): the first vertex where the path has turned by more
-    /// than `min_turn_rad` from that segment's direction (a curve of gentle vertices adds up),
-    /// within `within_m` along the path. Its distance along the path from the drone's nearest
-    /// point on the segment, metres, and how far the path has turned there, radians; `None`
-    /// when the path runs on straight enough, or ends first.
-    pub fn bend_ahead(
-        &self,
-        position: [f64; 2],
-        min_turn_rad: f64,
-        within_m: f64,
-    ) -> Option<(f64, f64)> {
-        let k = self.segment;
-        let (a, b) = (*self.path.get(k)?, *self.path.get(k + 1)?);
-        let heading = |a: [f64; 2], b: [f64; 2]| (b[1] - a[1]).atan2(b[0] - a[0]);
-        let first = heading(a, b);
-        let (_, nearest) = project(position, a, b);
-        let mut along = dist(nearest, b);
-        for w in self.path[k + 1..].windows(2) {
-            if along > within_m {
-                return None;
-            }
-            let turn = wrap_angle(heading(w[0], w[1]) - first).abs();
-            if turn > min_turn_rad {
-                return Some((along, turn));
-            }
-            along += dist(w[0], w[1]);
-        }
-        None
     }
 
     /// One tick with the latest pose (`None`: invalid).
@@ -538,63 +456,5 @@ mod tests {
         assert!((e.to_degrees() - 0.2).abs() < 1e-9, "{}", e.to_degrees());
         assert!((wrap_angle(3.0 * PI) - PI).abs() < 1e-12);
         assert!((wrap_angle(-PI) - PI).abs() < 1e-12);
-    }
-
-    /// A follower that has stepped onto its path at `position`.
-    fn following(path: Vec<[f64; 2]>, position: [f64; 2]) -> PathFollower {
-        let mut f = PathFollower::new(FollowerConfig::default());
-        f.set_path(path);
-        f.step(Some(Pose2 {
-            x: position[0],
-            y: position[1],
-            yaw: 0.0,
-        }));
-        f
-    }
-
-    #[test]
-    fn the_bend_ahead_is_where_the_path_has_turned_enough_from_the_drones_way() {
-        let min = 40f64.to_radians();
-        // East along a corridor, then north through a door 2 m on.
-        let f = following(vec![[0.0, 0.0], [2.0, 0.0], [2.0, 1.0]], [0.5, 0.1]);
-        let (d, turn) = f.bend_ahead([0.5, 0.1], min, 3.0).expect("a bend");
-        assert!(
-            (d - 1.5).abs() < 1e-9 && (turn - FRAC_PI_2).abs() < 1e-9,
-            "{d} {turn}"
-        );
-        // Not looked for so far ahead.
-        assert_eq!(f.bend_ahead([0.5, 0.1], min, 1.0), None);
-        // Gentle vertices of 25° each: the bend is where they add up past 40°.
-        let (c, s) = (25f64.to_radians().cos(), 25f64.to_radians().sin());
-        let (c2, s2) = (50f64.to_radians().cos(), 50f64.to_radians().sin());
-        let curve = vec![[0.0, 0.0], [1.0, 0.0], [1.0 + c, s], [1.0 + c + c2, s + s2]];
-        let f = following(curve, [0.2, 0.0]);
-        let (d, turn) = f.bend_ahead([0.2, 0.0], min, 3.0).expect("a bend");
-        assert!((d - 1.8).abs() < 1e-9, "{d}");
-        assert!((turn - 50f64.to_radians()).abs() < 1e-9, "{turn}");
-        // Straight on to the end, or no path: none.
-        let f = following(vec![[0.0, 0.0], [2.0, 0.0], [4.0, 0.1]], [0.5, 0.0]);
-        assert_eq!(f.bend_ahead([0.5, 0.0], min, 5.0), None);
-        assert_eq!(
-            PathFollower::default().bend_ahead([0.0, 0.0], min, 5.0),
-            None
-        );
-    }
-
-    #[test]
-    fn a_drone_too_fast_for_the_bend_ahead_is_braked_against_its_motion() {
-        let bend = BendSpeed::default();
-        // 0.9 m/s east 0.3 m before a bend (0.6 m/s allowed): braked west by 0.6 × 0.3.
-        let [bx, by] = bend.brake([0.9, 0.0], 0.3);
-        assert!((bx + 0.18).abs() < 1e-9 && by.abs() < 1e-12, "{bx} {by}");
-        // Far enough out, or slow enough: nothing.
-        assert_eq!(bend.brake([0.9, 0.0], 0.7), [0.0, 0.0]);
-        assert_eq!(bend.brake([0.2, 0.0], 0.0), [0.0, 0.0]);
-        // Much too fast: at most `brake_max`, still against the motion.
-        let [bx, by] = bend.brake([0.0, -2.0], 0.0);
-        assert!(
-            bx.abs() < 1e-12 && (by - bend.brake_max).abs() < 1e-9,
-            "{bx} {by}"
-        );
     }
 }

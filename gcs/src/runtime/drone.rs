@@ -11,7 +11,7 @@ use nalgebra::Isometry3;
 use nav::Grid;
 use nav::avoid::{KeepClear, brake_toward_walls, keep_clear};
 use nav::control::{PidGains, Pose3, PositionController, PositionGains};
-use nav::local::{BendSpeed, Follow, FollowerConfig, PathFollower, Pose2, wrap_angle};
+use nav::local::{Follow, FollowerConfig, PathFollower, Pose2, wrap_angle};
 use nav::mission::SAME_FRONTIER_M;
 use nav::proximity::{Proximity, ProximityConfig};
 use nav::sweep::{self, View};
@@ -120,8 +120,6 @@ pub struct DroneConfig {
     /// the drone's centre, leads back out to it, and leads less far near walls
     /// ([`nav::avoid::keep_clear`]).
     pub keep_clear: KeepClear,
-    /// How fast it may fly toward a bend of its path ([`nav::local::BendSpeed`]).
-    pub bend_speed: BendSpeed,
     /// The mission planner plans from a drone's position while its uncertainty (1 σ) is at most
     /// this, metres: more than flying tolerates ([`EkfConfig::max_position_sigma`]), since a
     /// frontier and a path are chosen as well from a position known to a metre. A drone whose
@@ -228,7 +226,6 @@ impl Default for DroneConfig {
             ekf: EkfConfig::default(),
             hold_band_m: 0.1,
             keep_clear: KeepClear::default(),
-            bend_speed: BendSpeed::default(),
             plan_position_sigma_m: 1.0,
             stuck_s: 15.0,
             scan_s: 10.0,
@@ -1274,26 +1271,13 @@ impl Drone {
         // An approach to a wall faster than can stop short of it is braked: `keep_clear`'s
         // steer point moves with the drone, so the derivative terms see no drift toward a
         // jamb while pursuing a carrot.
-        let velocity = self.ekf.valid_velocity();
-        let mut push = [0.0; 2];
-        if let (Some(map), Some(velocity)) = (&self.map, velocity) {
-            push = brake_toward_walls(map, here, velocity, &config.keep_clear);
+        if let (Some(map), Some(velocity)) = (&self.map, self.ekf.valid_velocity()) {
+            let [bx, by] = brake_toward_walls(map, here, velocity, &config.keep_clear);
+            let (s, co) = estimate.yaw.sin_cos();
+            let (forward, left) = (co * bx + s * by, -s * bx + co * by);
+            c.pitch = (c.pitch + forward).clamp(-1.0, 1.0);
+            c.roll = (c.roll - left).clamp(-1.0, 1.0);
         }
-        // Too fast for the bend ahead (it flies on through a bend while it turns, carrying its
-        // speed across: at a door off a corridor, into the far jamb): braked.
-        let bend = &config.bend_speed;
-        if let (true, Some(velocity)) = (self.tracking, velocity)
-            && let Some((ahead, _)) =
-                self.follower
-                    .bend_ahead(here, bend.min_turn_rad, bend.within_m)
-        {
-            let [bx, by] = bend.brake(velocity, ahead);
-            push = [push[0] + bx, push[1] + by];
-        }
-        let (s, co) = estimate.yaw.sin_cos();
-        let (forward, left) = (co * push[0] + s * push[1], -s * push[0] + co * push[1]);
-        c.pitch = (c.pitch + forward).clamp(-1.0, 1.0);
-        c.roll = (c.roll - left).clamp(-1.0, 1.0);
         if sweep {
             c.yaw = f64::from(config.blind_yaw);
         }
@@ -1966,45 +1950,6 @@ mod tests {
             s.roll < 0.0 && s.roll > -(p + 0.02) as f32,
             "a lean left of about {p}: {s:?}"
         );
-    }
-
-    #[test]
-    fn a_drone_too_fast_for_the_bend_into_a_door_is_braked_before_it() {
-        // East along a corridor at 0.9 m/s, its path turning north into a door at x = 3 m.
-        let path = vec![[0.0, 0.0], [3.0, 0.0], [3.0, 2.0]];
-        let pitch_at = |x_end: f64, config: &DroneConfig| {
-            let mut drone = exploring_drone(Arc::default(), config);
-            drone.set_plan(Some([3.0, 2.0]), path.clone(), None, 0.0);
-            let mut pitch = 0.0;
-            // Two seconds of fixes, for the filter's speed to settle.
-            for i in 1..=20 {
-                let t = 0.1 * f64::from(i);
-                let x = x_end - 0.9 * (2.0 - t);
-                drone.slam_fix(t, [x, 0.0, 0.9], 0.0, None, false);
-                drone.tick(t, config);
-                assert!(drone.tracking, "pursuing its carrot");
-                pitch = f64::from(drone.sticks.expect("sticks").pitch);
-            }
-            let speed = drone.ekf.valid_velocity().expect("a speed")[0];
-            assert!(speed > 0.7, "{speed}");
-            (pitch, speed)
-        };
-        let config = DroneConfig::default();
-        let unbraked = DroneConfig {
-            bend_speed: BendSpeed {
-                brake_gain: 0.0,
-                ..config.bend_speed
-            },
-            ..config.clone()
-        };
-        // 0.3 m before the bend, where 0.6 m/s is allowed: braked, by 0.6 stick per m/s of the
-        // filter's speed beyond that (which the braking sticks fed to the filter lower).
-        let ((braked, speed), (not, _)) = (pitch_at(2.7, &config), pitch_at(2.7, &unbraked));
-        assert!(speed > 0.75, "{speed}");
-        assert!(braked < not - 0.6 * 0.15, "braked {braked}, not {not}");
-        // 1.5 m before it, 0.9 m/s is slow enough.
-        let ((far, _), (far_not, _)) = (pitch_at(1.5, &config), pitch_at(1.5, &unbraked));
-        assert!((far - far_not).abs() < 1e-6, "{far} against {far_not}");
     }
 
     #[test]
