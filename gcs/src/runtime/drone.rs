@@ -561,11 +561,7 @@ impl Drone {
     /// [`Drone::setpoint`] while it flies on a pose (in the air, with a valid pose); `None`
     /// otherwise, when no setpoint is flown.
     pub fn flown_setpoint(&self) -> Option<[f64; 2]> {
-        let flying = matches!(
-            self.phase,
-            Phase::TakingOff | Phase::Exploring | Phase::Holding | Phase::Returning
-        );
-        (flying && self.pose().is_some()).then_some(self.setpoint)
+        (self.phase.flying() && self.pose().is_some()).then_some(self.setpoint)
     }
 
     /// A new occupancy map: the walls to keep off ([`DroneConfig::keep_clear`]).
