@@ -240,6 +240,9 @@ pub struct DroneSummary {
     pub collisions: u32,
     /// Charged batteries it took off again on (`--battery-swap`).
     pub battery_swaps: u32,
+    /// The charge left in its battery at the end, as the simulator knows it (whatever the
+    /// vehicle reported: over the shield only a voltage), percent.
+    pub battery_left_pct: u8,
     /// The phase it ended in.
     pub final_phase: &'static str,
     /// Why it left the mission before the end (its battery, its camera, its link, the SLAM,
@@ -639,10 +642,13 @@ fn watch(
         std::thread::sleep(Duration::from_millis(20));
     }
     let rc = sitl.rc_stats();
-    let collisions: Vec<u32> = sitl.with_sim(|sim| {
+    let (collisions, battery_left): (Vec<u32>, Vec<u8>) = sitl.with_sim(|sim| {
         (0..sim.len())
-            .map(|k| sim.vehicle(k).state().collisions)
-            .collect()
+            .map(|k| {
+                let v = sim.vehicle(k);
+                (v.state().collisions, v.battery_remaining())
+            })
+            .unzip()
     });
     let perception = report
         .perception
@@ -706,6 +712,7 @@ fn watch(
                     odometry_frames: perception.slam.estimate(k).map_or(0, |e| e.odometry_frames),
                     collisions: collisions[k],
                     battery_swaps: report.drones[k].battery_swaps,
+                    battery_left_pct: battery_left[k],
                     final_phase: report.drones[k].phase.name(),
                     left_mission: report.drones[k].left_mission.clone(),
                     rc_frames: rc.get(k).and_then(Option::as_ref).map(|r| r.frames),

@@ -500,10 +500,11 @@ fn a_drone_whose_camera_dies_and_one_whose_battery_runs_low_go_home_and_the_thir
 
 #[test]
 fn a_drone_home_for_its_battery_gets_a_charged_one_and_rejoins_the_exploration() {
-    // MAVLink reports the charge left; the shield only the pack's voltage.
+    // MAVLink reports the charge left; the shield only the pack's voltage, from which the
+    // station reads the charge.
     for (link, low, charged) in [
         ("mavlink", "battery at 20 %", "(100 %)"),
-        ("shield", "battery at 11.", " V)"),
+        ("shield", "battery at 1", " V)"),
     ] {
         let (summary, stderr, out) = explore(
             &format!("swap-{link}"),
@@ -531,6 +532,16 @@ fn a_drone_home_for_its_battery_gets_a_charged_one_and_rejoins_the_exploration()
                 .unwrap_or_else(|| panic!("{link}: {what}: {stderr}"))
         };
         said(&format!("drone 2: {low}"));
+        if link == "shield" {
+            // The charge read off the voltage as it fell (a pack that loses that much so fast
+            // is low before the reading is down to 20 %).
+            let reading = &stderr[said("drone 2: battery at 1") + "drone 2: ".len()..];
+            let reading = &reading[..reading.find(": ").unwrap_or(reading.len())];
+            assert!(
+                reading.contains(" V (about ") && reading.ends_with(" %)"),
+                "{reading}"
+            );
+        }
         said("returning to its start");
         said("drone 2: landed: waiting for a charged battery to rejoin");
         let replaced = stderr
@@ -557,6 +568,49 @@ fn a_drone_home_for_its_battery_gets_a_charged_one_and_rejoins_the_exploration()
             assert!(d["left_mission"].is_null(), "{link}: {d}");
             assert_eq!(d["final_phase"], "landed", "{link}: {d}");
         }
+        std::fs::remove_dir_all(&out).ok();
+    }
+}
+
+#[test]
+fn drones_whose_battery_runs_down_turn_home_in_time_over_either_link() {
+    // Three minutes of flight on a pack: the drones turn home when what is left would only just
+    // bring them back, read off the autopilot's charge over MAVLink and off the voltage over
+    // the shield, and land at their starts with more than the reserve left.
+    for link in ["mavlink", "shield"] {
+        let (summary, stderr, out) = explore(
+            &format!("flight-time-{link}"),
+            &[
+                "--link",
+                link,
+                "--speed",
+                "5",
+                "--timeout",
+                "300",
+                "--poses",
+                "truth",
+                "--flight-time",
+                "3",
+                "--no-log",
+            ],
+        );
+        assert_eq!(summary["all_landed"], true, "{link}: {summary}");
+        assert!(
+            stderr.contains(" m from its start: about "),
+            "{link}: the return was not sized to a way home: {stderr}"
+        );
+        for d in summary["drones"].as_array().expect("drones") {
+            let why = d["left_mission"].as_str().unwrap_or_default();
+            assert!(why.starts_with("battery at "), "{link}: {d}");
+            assert_eq!(why.contains(" V (about "), link == "shield", "{link}: {d}");
+            assert_eq!(d["final_phase"], "landed", "{link}: {d}");
+            let left = number(&d["battery_left_pct"]);
+            assert!((15.0..=45.0).contains(&left), "{link}: {d}");
+        }
+        assert!(
+            stderr.matches(": home: landing").count() == 2,
+            "{link}: {stderr}"
+        );
         std::fs::remove_dir_all(&out).ok();
     }
 }

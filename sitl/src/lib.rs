@@ -2,7 +2,8 @@
 //! sensors, and endpoints that speak to the station exactly like hardware.
 //!
 //! * [`world`]: floor plans (world text, `map_server`, HouseExpo) extruded to a ceiling;
-//! * [`vehicle`]: the multirotor and its flight controller; [`sensors`]: sonar, IMU yaw, battery;
+//! * [`vehicle`]: the multirotor and its flight controller; [`battery`]: its LiPo pack;
+//!   [`sensors`]: sonar, IMU yaw, battery;
 //! * [`render`]: the RGB-D camera;
 //! * [`sim`]: vehicles in a world, stepped in simulated time, deterministic for a seed;
 //! * [`autopilot`]: an ArduPilot-Copter-like autopilot speaking MAVLink;
@@ -12,6 +13,7 @@
 //!   each reports.
 
 pub mod autopilot;
+pub mod battery;
 pub mod bridge;
 pub mod render;
 pub mod rng;

@@ -14,6 +14,7 @@
 use link::{FlightMode, Sticks};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 
+use crate::battery::{Load, Pack};
 use crate::world::World;
 
 /// Gravity, m/s².
@@ -42,10 +43,8 @@ pub struct VehicleParams {
     pub loiter_speed: f64,
     /// Descent rate in LAND, m/s.
     pub land_speed: f64,
-    /// Battery voltage when full, V.
-    pub battery_full_v: f64,
-    /// Battery voltage when empty, V.
-    pub battery_empty_v: f64,
+    /// The battery: its cells and its sag under load.
+    pub battery: Pack,
     /// Flight time on one battery at hover, seconds.
     pub endurance_s: f64,
     /// A simulated operator puts a charged battery in a vehicle that has rested disarmed on
@@ -69,8 +68,7 @@ impl Default for VehicleParams {
             drag: 0.6,
             loiter_speed: 1.5,
             land_speed: 0.5,
-            battery_full_v: 12.6,
-            battery_empty_v: 10.5,
+            battery: Pack::default(),
             endurance_s: 12.0 * 60.0,
             battery_swap_s: None,
             camera_offset: [0.1, 0.0, 0.05],
@@ -219,11 +217,18 @@ impl Vehicle {
         self.wind = wind;
     }
 
-    /// Battery voltage now, V (sags with use).
+    /// Battery voltage now, V: a LiPo pack's at the charge left, sagging under the load of the
+    /// motors ([`crate::battery`]).
     pub fn battery_voltage(&self) -> f64 {
-        let p = &self.params;
-        let left = (1.0 - self.state.consumed).clamp(0.0, 1.0);
-        p.battery_empty_v + (p.battery_full_v - p.battery_empty_v) * left.powf(0.7)
+        let s = &self.state;
+        let load = match (s.armed, s.landed) {
+            (false, _) => Load::None,
+            (true, true) => Load::Idle,
+            (true, false) => Load::Flying,
+        };
+        self.params
+            .battery
+            .voltage((1.0 - s.consumed).clamp(0.0, 1.0), load)
     }
 
     /// Battery left, percent.
@@ -836,7 +841,7 @@ mod tests {
         assert!(!v.take_events().contains(&VehicleEvent::BatterySwapped));
         fly(&mut v, &w, Sticks::CENTRED, 2.0);
         assert_eq!(v.battery_remaining(), 100);
-        assert!((v.battery_voltage() - 12.6).abs() < 1e-9);
+        assert!((v.battery_voltage() - 12.6).abs() < 1e-6);
         assert_eq!(v.take_events(), vec![VehicleEvent::BatterySwapped]);
         // Half a battery or more left: kept. Off by default.
         let mut half = Vehicle::new(params, 5.0, 5.0, 0.0);

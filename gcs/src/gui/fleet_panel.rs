@@ -124,20 +124,26 @@ fn status(ui: &mut egui::Ui, d: &DroneView, card: &Card, now: f64) {
             None => RichText::new("armed: -"),
         });
     });
-    // Battery as a bar with its voltage, and the charge it turns home at from where it is: red
-    // within 5 % of that, orange within 15 %.
+    // Battery as a bar with its voltage and charge (the autopilot's estimate, or one read off
+    // the voltage: "≈"), and the charge it turns home at from where it is: red within 5 % of
+    // that, orange within 15 %.
     match t.battery {
         Some(b) => {
-            let fraction = b.remaining_pct.map_or(0.0, |p| f32::from(p) / 100.0);
+            let (charge, read) = match (b.remaining_pct, d.battery_estimate_pct) {
+                (Some(p), _) => (Some(f64::from(p)), format!("{p} %")),
+                (None, Some(p)) => (Some(p), format!("≈{p:.0} %")),
+                (None, None) => (None, String::new()),
+            };
+            let fraction = charge.map_or(0.0, |p| (p / 100.0) as f32);
             let home_at = d
                 .battery_home_at
                 .map_or(String::new(), |h| format!(" · home at {h:.0} %"));
-            let text = match b.remaining_pct {
-                Some(p) => format!("{:.1} V  {p} %{home_at}", b.voltage_v),
+            let text = match charge {
+                Some(_) => format!("{:.1} V  {read}{home_at}", b.voltage_v),
                 None => format!("{:.1} V", b.voltage_v),
             };
             let turn = d.battery_home_at.unwrap_or(25.0);
-            let fill = match b.remaining_pct.map(f64::from) {
+            let fill = match charge {
                 Some(p) if p < turn + 5.0 => Color32::from_rgb(210, 30, 30),
                 Some(p) if p < turn + 15.0 => Color32::from_rgb(230, 140, 0),
                 _ => Color32::from_rgb(40, 160, 70),

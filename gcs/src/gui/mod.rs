@@ -589,6 +589,7 @@ mod tests {
                 ..Telemetry::default()
             },
             battery_home_at: Some(38.4),
+            battery_estimate_pct: None,
             pose: Some([1.0 + id as f64, 2.0, 0.9, 0.5]),
             pose_sigma: 0.05,
             slam: RobotState::Tracking,
@@ -676,6 +677,16 @@ mod tests {
         assert_eq!(h.get_all_by_label_contains("left the mission").count(), 1);
         // Messages.
         h.get_by_label_contains("drone 2: link lost");
+        // A drone over the shield over the shield, which reports only the voltage: the charge read off it.
+        let mut d3 = drone(2, Phase::Exploring, LinkState::Connected);
+        d3.telemetry.battery = Some(Battery {
+            voltage_v: 11.2,
+            remaining_pct: None,
+        });
+        d3.battery_estimate_pct = Some(41.6);
+        let (mut h, _rx) = window(snapshot(MissionState::Exploring, vec![d3]));
+        step(&mut h);
+        h.get_by_label_contains("11.2 V  ≈42 % · home at 38 %");
     }
 
     #[test]

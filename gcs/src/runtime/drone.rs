@@ -250,9 +250,13 @@ impl Default for DroneConfig {
                 turn_and_land_s: 15.0,
                 home_margin: 1.5,
                 drain_after_pct: 5,
-                // A LiPo cell under hover load; about 23 % left in the simulator's pack.
-                low_cell_v: 3.75,
-                low_for_s: 3.0,
+                // Over the shield: a pack's voltage the median of 4 s of readings, its sag in
+                // the air the step from rest to 2–4 s into each flight (the simulated drone is
+                // up in about 1.5 s), 0.05 V a cell until then (less than most packs sag, so
+                // the charge reads low rather than high).
+                voltage_window_s: 4.0,
+                sag_window_s: [2.0, 4.0],
+                sag_cell_v: 0.05,
                 charged_pct: 90,
                 charged_cell_v: 4.1,
             },
@@ -793,6 +797,12 @@ impl Drone {
         .flatten()
     }
 
+    /// The charge read off its pack's voltage, percent, for a vehicle that reports only the
+    /// voltage ([`battery::Gauge::estimate_pct`]).
+    pub fn battery_estimate_pct(&self) -> Option<f64> {
+        self.gauge.estimate_pct()
+    }
+
     /// The length of its way home on the map just planned on, metres (`None`: no way known);
     /// what its low-battery return is sized to.
     pub fn set_way_home(&mut self, metres: Option<f64>) {
@@ -1008,6 +1018,11 @@ impl Drone {
         }
         let on_ground = matches!(self.phase, Phase::Idle | Phase::Arming | Phase::Landed)
             || telemetry.armed == Some(false);
+        if on_ground && telemetry.armed == Some(false) {
+            // At rest: what the sag of the next flight is measured against.
+            self.gauge
+                .at_rest(now, telemetry.battery.as_ref(), &config.battery);
+        }
         if let Some(h) = telemetry.height_m {
             self.ekf.update_height(now, f64::from(h));
         }

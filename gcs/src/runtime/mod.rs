@@ -202,6 +202,9 @@ pub struct DroneView {
     /// The charge at which it turns home from where it is, percent (while it explores, once
     /// its pack's drain is measured).
     pub battery_home_at: Option<f64>,
+    /// The charge read off its pack's voltage, percent, for a vehicle that reports only the
+    /// voltage (the shield), once it has flown ([`battery::Gauge::estimate_pct`]).
+    pub battery_estimate_pct: Option<f64>,
     /// The filter's pose (x, y, z, yaw), if valid.
     pub pose: Option<[f64; 4]>,
     /// Standard deviation of the filter's horizontal position, metres.
@@ -1052,6 +1055,7 @@ impl Mission {
                 link: d.link.status(),
                 telemetry: d.link.telemetry(),
                 battery_home_at: d.battery_home_at(),
+                battery_estimate_pct: d.battery_estimate_pct(),
                 pose: d.pose(),
                 pose_sigma: d.ekf.estimate().position_sigma,
                 slam: view.robots.get(k).map_or(RobotState::Waiting, |r| r.state),
