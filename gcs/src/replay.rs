@@ -335,9 +335,8 @@ pub(crate) fn planner_configs(setup: &Setup) -> Vec<PlannerConfig> {
             strategy,
             robot_radius_m,
             region_radius_m: setup.region_radius_m.unwrap_or(0.0),
-            hold_margin_m: setup
-                .hold_margin_m
-                .unwrap_or(PlannerConfig::default().hold_margin_m),
+            // Logs from before the margin planned without one.
+            hold_margin_m: setup.hold_margin_m.unwrap_or(0.0),
             ..PlannerConfig::default()
         })
         .collect()
@@ -458,8 +457,13 @@ mod tests {
             drones: vec![],
         });
         assert_eq!(configs.len(), RuntimeConfig::default().planner_radii.len());
-        // Logs from before regions planned without them; newer ones say what they used.
-        assert!(configs.iter().all(|c| c.region_radius_m == 0.0));
+        // Logs from before regions and goal holding planned without them; newer ones say what
+        // they used.
+        assert!(
+            configs
+                .iter()
+                .all(|c| c.region_radius_m == 0.0 && c.hold_margin_m == 0.0)
+        );
         let with_regions = planner_configs(&Setup {
             version: 1,
             world: None,
