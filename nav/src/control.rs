@@ -276,7 +276,7 @@ impl PositionController {
     /// cruising at 0.9 m/s by half a stick for a tick.) They difference over at least
     /// [`DERIVATIVE_WINDOW_S`], however close together the updates come.
     pub fn update(&mut self, setpoint: &Pose3, estimate: &Pose3, dt: f64) -> StickCommand {
-        self.update_steered(setpoint, [setpoint.x, setpoint.y], estimate, None, dt)
+        self.update_steered(setpoint, [setpoint.x, setpoint.y], estimate, dt)
     }
 
     /// One update as [`PositionController::update`], steering to `steer` (map x/y, metres)
@@ -288,21 +288,11 @@ impl PositionController {
     /// coast on unbraked (on true poses, each of the three wall collisions in 40 two-drone
     /// missions came at the end of seconds of coasting at 0.1–0.6 m/s beside a wall, the
     /// sticks near zero).
-    ///
-    /// `velocity` (map x/y, m/s), when given, is the drone's own velocity as its filter
-    /// estimates it: the derivative terms then take the drone's motion from it instead of
-    /// differencing the estimate. Give it while holding a spot: a pose that jumps a few
-    /// centimetres (a registration on few matches in a turn on the spot), differenced over
-    /// 50 ms, reads as half a metre a second and kicks the sticks by a third to a half, which
-    /// moves the drone itself; the filter's velocity takes such a jump about half as much. Leave
-    /// it out while the setpoint is worked out from the estimate (a carrot ahead of it): then
-    /// both move with a jump of the estimate, and their difference does not.
     pub fn update_steered(
         &mut self,
         setpoint: &Pose3,
         steer: [f64; 2],
         estimate: &Pose3,
-        velocity: Option<[f64; 2]>,
         dt: f64,
     ) -> StickCommand {
         let target = [setpoint.x, setpoint.y];
@@ -337,10 +327,7 @@ impl PositionController {
                     }
                     [0.0; 2]
                 } else {
-                    let flown = velocity
-                        .filter(|v| v.iter().all(|c| c.is_finite()))
-                        .unwrap_or([moved[0] / span, moved[1] / span]);
-                    [led[0] / span - flown[0], led[1] / span - flown[1]]
+                    [(led[0] - moved[0]) / span, (led[1] - moved[1]) / span]
                 }
             }
             _ => [0.0; 2],
@@ -553,50 +540,6 @@ mod tests {
     }
 
     #[test]
-    fn holding_a_spot_on_the_filters_velocity_a_pose_that_jumps_kicks_little() {
-        // Holding still at a spot 5 cm east, PD 0.3, 0.6; the pose jumps 8 cm west for a tick
-        // (a registration on few matches) while the filter's velocity moves by a quarter of
-        // what that jump differenced reads as: 0.2 m/s against 0.8 m/s.
-        let pd = PidGains::pid(0.3, 0.0, 0.6);
-        let gains = PositionGains {
-            x: pd,
-            y: pd,
-            ..PositionGains::default()
-        };
-        let hold = Pose3 {
-            x: 0.05,
-            y: 0.0,
-            z: 1.0,
-            yaw: 0.0,
-        };
-        let kick = |velocity: Option<[f64; 2]>| {
-            let mut pc = PositionController::new(gains);
-            let mut here = Pose3 { x: 0.0, ..hold };
-            for _ in 0..3 {
-                pc.update_steered(&hold, [hold.x, hold.y], &here, Some([0.0; 2]), 0.1);
-            }
-            here.x -= 0.08;
-            pc.update_steered(&hold, [hold.x, hold.y], &here, velocity, 0.1)
-                .pitch
-        };
-        // Differenced: 0.3 × 0.13 + 0.6 × 0.8, half a stick east for a tick.
-        assert!((kick(None) - (0.3 * 0.13 + 0.6 * 0.8)).abs() < 1e-9);
-        // On the filter's velocity: 0.3 × 0.13 + 0.6 × 0.2.
-        assert!((kick(Some([-0.2, 0.0])) - (0.3 * 0.13 + 0.6 * 0.2)).abs() < 1e-9);
-        // A real drift the filter has measured is braked as hard as before.
-        let mut pc = PositionController::new(gains);
-        let at = Pose3 { x: 0.05, ..hold };
-        pc.update_steered(&hold, [hold.x, hold.y], &at, Some([0.0; 2]), 0.1);
-        let s = pc.update_steered(&hold, [hold.x, hold.y], &at, Some([0.3, 0.0]), 0.1);
-        assert!((s.pitch + 0.6 * 0.3).abs() < 1e-9, "{s:?}");
-        // A velocity that is not a number is no velocity: the estimate is differenced.
-        let mut pc = PositionController::new(gains);
-        pc.update_steered(&hold, [hold.x, hold.y], &at, None, 0.1);
-        let s = pc.update_steered(&hold, [hold.x, hold.y], &at, Some([f64::NAN, 0.0]), 0.1);
-        assert!(s.pitch.abs() < 1e-9, "{s:?}");
-    }
-
-    #[test]
     fn a_new_target_a_few_centimetres_off_kicks_nothing_then_its_motion_is_followed() {
         // Cruising +x at 0.5 m/s behind a carrot 0.4 m ahead that moves with it (ticks of
         // 0.1 s); a new path puts the carrot 8 cm to the left, too little to be seen as a jump.
@@ -687,7 +630,7 @@ mod tests {
                 };
                 let steer = [here.x + 0.2, 0.0];
                 pitch = if steered {
-                    pc.update_steered(&hold, steer, &here, None, 0.1).pitch
+                    pc.update_steered(&hold, steer, &here, 0.1).pitch
                 } else {
                     let at_steer = Pose3 {
                         x: steer[0],

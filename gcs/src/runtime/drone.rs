@@ -1269,17 +1269,9 @@ impl Drone {
         if self.flown.replace(target).is_some_and(|was| was != target) {
             self.controller.target_jumps();
         }
-        // Holding a spot, the derivative terms brake by the filter's velocity, which a pose
-        // jumping a few centimetres moves far less than the pose differenced; pursuing a
-        // carrot, by the pose differenced, as the carrot is worked out from it.
-        let velocity = if self.tracking {
-            None
-        } else {
-            self.ekf.valid_velocity()
-        };
-        let mut c =
-            self.controller
-                .update_steered(&setpoint, self.setpoint, &estimate, velocity, dt);
+        let mut c = self
+            .controller
+            .update_steered(&setpoint, self.setpoint, &estimate, dt);
         // Near a wall the controller flies even a small error: its derivative term brakes.
         if !self.tracking
             && self.setpoint == self.hold
