@@ -492,14 +492,15 @@ mod tests {
         }
     }
 
-    /// Readings of `v` volts every 0.1 s from `from` for `seconds`: at rest, or in the air
-    /// (then the first low reading).
+    /// Readings at rest of `v` volts every 0.1 s from `from` for `seconds`.
     fn hold_at_rest(g: &mut Gauge, from: f64, seconds: f64, v: f32) {
         for i in 0..(seconds * 10.0) as usize {
             g.at_rest(from + i as f64 * 0.1, Some(&volts(v)), &LIMITS);
         }
     }
 
+    /// Readings in the air of `v(t)` volts every 0.1 s from `from` for `seconds`; the first
+    /// low battery they give, if any.
     fn fly_at(
         g: &mut Gauge,
         from: f64,
