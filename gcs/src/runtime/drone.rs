@@ -174,8 +174,15 @@ pub struct DroneConfig {
     pub blind_brake_gain: f64,
     /// … at most this much stick, …
     pub blind_brake_max: f64,
-    /// … and nothing below this speed, m/s (the measurement's noise).
+    /// … and nothing below this speed, m/s (the measurement's noise). A brake alone leaves the
+    /// drone drifting at the speed where it balances the air's drag (in SITL 0.03–0.06 m/s in a
+    /// 0.1 m/s gust: 0.44 m on average over a blind stretch of 8 s), so…
     pub blind_brake_band: f64,
+    /// …the measured velocity is also integrated, and the drone is flown back toward where it
+    /// went blind at this much m/s per metre it has drifted, 1/s…
+    pub blind_hold_gain: f64,
+    /// …at most this fast, m/s.
+    pub blind_hold_max_mps: f64,
     /// With no pose, the drone leans away from walls its depth camera ranged near lately, or
     /// the map had round it when it went blind ([`nav::proximity`]).
     pub proximity: ProximityConfig,
@@ -247,6 +254,8 @@ impl Default for DroneConfig {
             blind_brake_gain: 0.5,
             blind_brake_max: 0.15,
             blind_brake_band: 0.03,
+            blind_hold_gain: 1.0,
+            blind_hold_max_mps: 0.1,
             proximity: ProximityConfig::default(),
             battery: battery::Limits {
                 // The simulated vehicle's battery failsafe lands it at 10 %.
@@ -316,6 +325,41 @@ fn brake(velocity: [f64; 2], yaw: f64, config: &DroneConfig) -> [f32; 2] {
     let roll = (config.blind_brake_gain * left).clamp(-limit, limit);
     let pitch = (-config.blind_brake_gain * forward).clamp(-limit, limit);
     [roll as f32, pitch as f32]
+}
+
+/// How far a drone without a pose has drifted since it went blind, as visual odometry measures
+/// it: the sum of its camera's frame-to-frame displacements that the filter took. (Not the
+/// filter's velocity: its model knows the lean, not the air, so in a draught it reads a drone
+/// leaning against the drift as still while it drifts on.) A frame the camera could not
+/// register on its previous one adds nothing, and the spot held moves by what it missed.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct Drift {
+    /// Metres, map frame.
+    moved: [f64; 2],
+}
+
+impl Drift {
+    /// A displacement measured between two frames, `forward` and `left` of the body heading
+    /// `yaw` (radians) at the first.
+    fn add(&mut self, forward: f64, left: f64, yaw: f64) {
+        let (s, c) = yaw.sin_cos();
+        self.moved[0] += c * forward - s * left;
+        self.moved[1] += s * forward + c * left;
+    }
+}
+
+/// Roll and pitch sticks that hold a drone without a pose where it went blind: back toward
+/// that spot (`drift` from it, metres) at a speed proportional to the distance, and braked
+/// against `velocity` (m/s, map frame) relative to that ([`brake`]).
+fn hold_blind(drift: [f64; 2], velocity: [f64; 2], yaw: f64, config: &DroneConfig) -> [f32; 2] {
+    let gain = config.blind_hold_gain;
+    let mut back = [-gain * drift[0], -gain * drift[1]];
+    let speed = back[0].hypot(back[1]);
+    if speed > config.blind_hold_max_mps {
+        let scale = config.blind_hold_max_mps / speed;
+        back = [back[0] * scale, back[1] * scale];
+    }
+    brake([velocity[0] - back[0], velocity[1] - back[1]], yaw, config)
 }
 
 /// A look around on the spot.
@@ -427,6 +471,8 @@ pub struct Drone {
     /// The phase the link was lost in.
     lost_in: Option<Phase>,
     blind_since: Option<f64>,
+    /// Blind: how far its camera has measured it drift since it went blind.
+    blind_drift: Drift,
     /// Lost, since when it has faced its last keyframe's heading ([`DroneConfig::blind_face_s`]).
     faced_since: Option<f64>,
     /// The IMU heading at its last SLAM keyframe, radians: where the camera last saw enough
@@ -532,6 +578,7 @@ impl Drone {
             pending: None,
             lost_in: None,
             blind_since: None,
+            blind_drift: Drift::default(),
             faced_since: None,
             keyframe_heading: None,
             keyframe_yaw: None,
@@ -984,6 +1031,12 @@ impl Drone {
     pub fn slam_odometry(&mut self, since: f64, stamp: f64, previous_from_body: &Isometry3<f64>) {
         let d = previous_from_body.translation.vector;
         let update = self.ekf.update_odometry(since, stamp, [d.x, d.y]);
+        // Blind, what it drifted: as much as the filter believes (a step it gated out as an
+        // outlier, a wrong registration, moves no spot held).
+        if self.pose().is_none() && update == Update::Applied {
+            self.blind_drift
+                .add(d.x, d.y, self.ekf.estimate().attitude[2]);
+        }
         tracing::debug!(
             drone = self.id + 1,
             since,
@@ -1179,6 +1232,7 @@ impl Drone {
             );
         };
         self.blind_since = None;
+        self.blind_drift = Drift::default();
         self.tracking = false;
         let here = [pose[0], pose[1]];
         // The map's walls all round, for the moment it goes blind (the camera sees only ahead).
@@ -1372,9 +1426,15 @@ impl Drone {
             }
             _ => config.blind_yaw,
         };
-        // Level, unless visual odometry still measures how the drone drifts: then against it.
+        // Level, unless visual odometry still measures how the drone drifts: then against it,
+        // and back to where it went blind.
         let [mut roll, mut pitch] = self.ekf.valid_velocity().map_or([0.0; 2], |v| {
-            brake(v, self.ekf.estimate().attitude[2], config)
+            hold_blind(
+                self.blind_drift.moved,
+                v,
+                self.ekf.estimate().attitude[2],
+                config,
+            )
         });
         // And off the walls round it, ranged by the camera or on the map before it went blind
         // (it drifts with the air meanwhile).
@@ -2267,6 +2327,93 @@ mod tests {
         // Still: level.
         let s = braking(0.0, 0.0);
         assert_eq!((s.roll, s.pitch), (0.0, 0.0), "within the band");
+    }
+
+    #[test]
+    fn a_drone_without_a_pose_holds_its_spot_on_the_drift_its_camera_measures() {
+        // The simulator's vehicle hovering in a steady 0.1 m/s draught, flown by the drone's
+        // sticks. The SLAM loses it; after 3 s blind its camera's consecutive frames measure
+        // the true motion (0.3 s late). How far the vehicle drifts from where they began to,
+        // over the next 10 s.
+        let drift = |config: &DroneConfig| {
+            let vehicle_link = Arc::new(StubbornVehicle::default());
+            *vehicle_link.yaw.lock().expect("yaw") = Some(0.0);
+            let mut drone = exploring_drone(vehicle_link.clone(), config);
+            let mut text = String::from("resolution 0.5\nceiling 3.0\n---\n");
+            for row in 0..10 {
+                let wall = row == 0 || row == 9;
+                text += &format!("#{}#\n", if wall { "#" } else { "." }.repeat(18));
+            }
+            let world = sitl::world::World::parse_text("hall", &text).expect("a hall");
+            let mut vehicle = sitl::vehicle::Vehicle::new(Default::default(), 5.0, 2.5, 0.0);
+            vehicle.set_armed(true);
+            vehicle.set_sticks(Sticks {
+                throttle: 1.0,
+                ..Sticks::CENTRED
+            });
+            while vehicle.state().position[2] < 0.9 {
+                vehicle.step(&world, 0.01);
+            }
+            vehicle.set_sticks(Sticks::CENTRED);
+            vehicle.set_wind([0.1, 0.0]);
+            let here = |v: &sitl::vehicle::Vehicle| {
+                let s = v.state();
+                Isometry3::new(
+                    nalgebra::Vector3::new(s.position[0] - 5.0, s.position[1] - 2.5, s.position[2]),
+                    nalgebra::Vector3::z() * s.yaw,
+                )
+            };
+            let mut poses = vec![here(&vehicle)];
+            drone.slam_fix(0.0, [0.0, 0.0, 0.9], 0.0, None, true);
+            drone.slam_lost(0.1, config);
+            let (mut t, mut blind_at, mut worst) = (0.0, None::<(f64, Isometry3<f64>)>, 0.0_f64);
+            let mut measured_at = None::<Isometry3<f64>>;
+            while t < 30.0 {
+                t += 0.1;
+                drone.slam_lost(t, config);
+                // Its frames measure nothing until it has been blind for 3 s (sooner, the filter
+                // would carry its pose on them).
+                if blind_at.is_some_and(|(since, _)| t > since + 3.0) {
+                    let [a, b] = [poses[poses.len() - 4], poses[poses.len() - 3]];
+                    drone.slam_odometry(t - 0.4, t - 0.3, &(a.inverse() * b));
+                }
+                drone.tick(t, config);
+                vehicle.set_sticks(drone.sticks.expect("sticks"));
+                for _ in 0..10 {
+                    vehicle.step(&world, 0.01);
+                }
+                let pose = here(&vehicle);
+                *vehicle_link.yaw.lock().expect("yaw") = Some(vehicle.state().yaw as f32);
+                poses.push(pose);
+                if drone.pose().is_none() {
+                    let (since, _) = *blind_at.get_or_insert((t, pose));
+                    if t <= since + 3.0 {
+                        continue;
+                    }
+                    let at = *measured_at.get_or_insert(pose);
+                    let moved = pose.translation.vector - at.translation.vector;
+                    worst = worst.max(moved.xy().norm());
+                    if t > since + 13.0 {
+                        break;
+                    }
+                }
+            }
+            assert!(blind_at.is_some(), "the pose never expired");
+            worst
+        };
+        let config = DroneConfig::default();
+        let held = drift(&config);
+        let braked = drift(&DroneConfig {
+            blind_hold_gain: 0.0,
+            ..config.clone()
+        });
+        // Braked only, it balances the draught at a speed the brake's gain sets, and drifts on
+        // (0.05 m/s here); held, it stops within centimetres.
+        assert!(held < 0.1, "held within {held:.2} m");
+        assert!(
+            braked > 0.3,
+            "braked only: {braked:.2} m, held: {held:.2} m"
+        );
     }
 
     #[test]
