@@ -69,10 +69,15 @@ pub struct SimArgs {
     #[arg(long, value_name = "METRES", default_value_t = PlannerConfig::default().region_radius_m)]
     pub region_radius: f64,
     /// A drone keeps the frontier it flies to unless another is cheaper by more than this,
-    /// metres of path; 0 (the default): every plan assigns afresh (two drones whose costs nearly
-    /// tie may then swap their goals at every plan).
+    /// metres of path; 0: every plan assigns afresh (two drones whose costs nearly tie may then
+    /// swap their goals at every plan).
     #[arg(long, value_name = "METRES", default_value_t = PlannerConfig::default().hold_margin_m)]
     pub hold_margin: f64,
+    /// A frontier whose unknown side is an enclosed pocket, walled more than open, of at most
+    /// this area is not explored (the inside of a pillar seen from all sides but one), m²; 0:
+    /// every frontier is.
+    #[arg(long, value_name = "M2", default_value_t = PlannerConfig::default().max_pocket_m2)]
+    pub max_pocket: f64,
     /// How a drone looks around at a goal: turning the short way to what the map shows
     /// unknown, no further (`sweep`), or a whole turn every time (`whole`, as the thesis).
     #[arg(long, value_enum, default_value_t = LookAround::Sweep)]
@@ -288,6 +293,18 @@ fn validate(args: &ExploreArgs) -> anyhow::Result<Vec<Fault>> {
             args.sim.region_radius
         );
     }
+    if !(args.sim.hold_margin.is_finite() && (0.0..=50.0).contains(&args.sim.hold_margin)) {
+        bail!(
+            "--hold-margin {} must be between 0 (off) and 50 metres",
+            args.sim.hold_margin
+        );
+    }
+    if !(args.sim.max_pocket.is_finite() && (0.0..=100.0).contains(&args.sim.max_pocket)) {
+        bail!(
+            "--max-pocket {} must be between 0 (off) and 100 square metres",
+            args.sim.max_pocket
+        );
+    }
     args.log.validate()?;
     if !(args.timeout.is_finite() && args.timeout > 0.0) {
         bail!(
@@ -426,6 +443,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
             planner_radii: RuntimeConfig::default().planner_radii,
             region_radius_m: Some(args.sim.region_radius),
             hold_margin_m: Some(args.sim.hold_margin),
+            max_pocket_m2: Some(args.sim.max_pocket),
             drones: fleet
                 .drones
                 .iter()
@@ -453,6 +471,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
             strategy: args.sim.strategy.strategy(),
             region_radius_m: args.sim.region_radius,
             hold_margin_m: args.sim.hold_margin,
+            max_pocket_m2: args.sim.max_pocket,
             timeout: Some(args.timeout),
             drone: DroneConfig {
                 sweep: match args.sim.look_around {

@@ -175,6 +175,7 @@ pub fn run_with(args: &FlyArgs, window: Option<Window>) -> anyhow::Result<()> {
             planner_radii: RuntimeConfig::default().planner_radii,
             region_radius_m: Some(RuntimeConfig::default().region_radius_m),
             hold_margin_m: Some(RuntimeConfig::default().hold_margin_m),
+            max_pocket_m2: Some(RuntimeConfig::default().max_pocket_m2),
             drones: fleet
                 .iter()
                 .map(|v| SetupDrone::new(&v.name, v.start, &body_from_camera, v.altitude))

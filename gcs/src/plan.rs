@@ -51,6 +51,10 @@ pub struct PlanArgs {
     /// spread one to a region first, metres; 0: off.
     #[arg(long, value_name = "METRES", default_value_t = PlannerConfig::default().region_radius_m)]
     region_radius: f64,
+    /// A frontier whose unknown side is an enclosed pocket, walled more than open, of at most
+    /// this area is ignored, m²; 0: none is.
+    #[arg(long, value_name = "M2", default_value_t = PlannerConfig::default().max_pocket_m2)]
+    max_pocket: f64,
     /// Treat the map as the whole building and plan on what the robots would have explored within
     /// this many metres of travel from their positions (to try the planner on a complete map).
     #[arg(long, value_name = "METRES")]
@@ -106,6 +110,9 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
     if !(args.region_radius.is_finite() && args.region_radius >= 0.0) {
         bail!("--region-radius must be zero (off) or more metres");
     }
+    if !(args.max_pocket.is_finite() && args.max_pocket >= 0.0) {
+        bail!("--max-pocket must be zero (off) or more square metres");
+    }
     let (map, p, elapsed, recorded) = match (&args.map, &args.log, args.at) {
         (Some(_), _, Some(_)) => {
             bail!("--at picks a decision of a mission log: give it with --log, not with --map")
@@ -123,6 +130,7 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
                 robot_radius_m: args.robot_radius,
                 min_frontier_cells: args.min_frontier.max(1),
                 region_radius_m: args.region_radius,
+                max_pocket_m2: args.max_pocket,
                 strategy: match args.strategy {
                     StrategyArg::Hungarian => Strategy::Hungarian,
                     StrategyArg::Greedy => Strategy::Greedy,

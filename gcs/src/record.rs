@@ -49,6 +49,10 @@ pub struct Setup {
     /// whose plans held no goal).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub hold_margin_m: Option<f64>,
+    /// Frontiers onto enclosed pockets of unknown up to this area were not explored, m²
+    /// (absent from older logs, which explored every frontier).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_pocket_m2: Option<f64>,
     /// The drones.
     pub drones: Vec<SetupDrone>,
 }

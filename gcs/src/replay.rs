@@ -337,6 +337,8 @@ pub(crate) fn planner_configs(setup: &Setup) -> Vec<PlannerConfig> {
             region_radius_m: setup.region_radius_m.unwrap_or(0.0),
             // Logs from before the margin planned without one.
             hold_margin_m: setup.hold_margin_m.unwrap_or(0.0),
+            // …and explored every frontier.
+            max_pocket_m2: setup.max_pocket_m2.unwrap_or(0.0),
             ..PlannerConfig::default()
         })
         .collect()
@@ -454,15 +456,16 @@ mod tests {
             planner_radii: vec![],
             region_radius_m: None,
             hold_margin_m: None,
+            max_pocket_m2: None,
             drones: vec![],
         });
         assert_eq!(configs.len(), RuntimeConfig::default().planner_radii.len());
-        // Logs from before regions and goal holding planned without them; newer ones say what
-        // they used.
+        // Logs from before regions, goal holding and pockets planned without them; newer ones
+        // say what they used.
         assert!(
-            configs
-                .iter()
-                .all(|c| c.region_radius_m == 0.0 && c.hold_margin_m == 0.0)
+            configs.iter().all(|c| c.region_radius_m == 0.0
+                && c.hold_margin_m == 0.0
+                && c.max_pocket_m2 == 0.0)
         );
         let with_regions = planner_configs(&Setup {
             version: 1,
@@ -471,11 +474,13 @@ mod tests {
             planner_radii: vec![0.3],
             region_radius_m: Some(2.5),
             hold_margin_m: Some(0.5),
+            max_pocket_m2: Some(0.4),
             drones: vec![],
         });
         assert_eq!(with_regions.len(), 1);
         assert_eq!(with_regions[0].region_radius_m, 2.5);
         assert_eq!(with_regions[0].hold_margin_m, 0.5);
+        assert_eq!(with_regions[0].max_pocket_m2, 0.4);
         assert_eq!(with_regions[0].strategy, Strategy::Greedy);
         let robots = [Some([0.5, 1.0])];
         let live = nav::mission::plan_first_open(&grid, &robots, &configs)

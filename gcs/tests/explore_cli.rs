@@ -638,6 +638,14 @@ fn bad_explore_arguments_are_refused_before_anything_starts() {
             "must be between 0 (off) and 50 metres",
         ),
         (
+            vec!["explore", "--hold-margin", "NaN"],
+            "must be between 0 (off) and 50 metres",
+        ),
+        (
+            vec!["explore", "--max-pocket=-0.5"],
+            "must be between 0 (off) and 100 square metres",
+        ),
+        (
             vec!["explore", "--timeout=-5"],
             "positive number of simulated seconds",
         ),

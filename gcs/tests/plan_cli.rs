@@ -208,6 +208,11 @@ fn bad_input_gets_clear_errors() {
         1,
         "--region-radius must be",
     );
+    refused(
+        &["--map", &willow, "--robot", "12,30", "--max-pocket=-1"],
+        1,
+        "--max-pocket must be",
+    );
     refused(&["--map", &willow], 2, "--robot");
     // A decision of a mission log: --at with --log only, and the log must be one.
     refused(&["--log", "/nonexistent/mission.mcap"], 2, "--at");

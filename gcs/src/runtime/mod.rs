@@ -51,6 +51,9 @@ pub struct RuntimeConfig {
     /// A drone keeps the frontier it flies to unless another is cheaper by more than this
     /// ([`PlannerConfig::hold_margin_m`]), metres of path.
     pub hold_margin_m: f64,
+    /// A frontier onto an enclosed pocket of unknown no bigger than this is ignored
+    /// ([`PlannerConfig::max_pocket_m2`]), m²; 0: none is.
+    pub max_pocket_m2: f64,
     /// Control period, seconds (mission clock).
     pub control_period: f64,
     /// Mission-planner period, seconds.
@@ -77,6 +80,7 @@ impl Default for RuntimeConfig {
             planner_radii: vec![0.45, 0.35, 0.25],
             region_radius_m: PlannerConfig::default().region_radius_m,
             hold_margin_m: PlannerConfig::default().hold_margin_m,
+            max_pocket_m2: PlannerConfig::default().max_pocket_m2,
             control_period: 0.1,
             plan_period: 1.0,
             drone: DroneConfig::default(),
@@ -843,6 +847,7 @@ impl Mission {
                 region_radius_m: self.config.region_radius_m,
                 held: held.clone(),
                 hold_margin_m: self.config.hold_margin_m,
+                max_pocket_m2: self.config.max_pocket_m2,
                 ..PlannerConfig::default()
             })
             .collect();
