@@ -73,7 +73,7 @@ pub struct SimArgs {
     /// swap their goals at every plan).
     #[arg(long, value_name = "METRES", default_value_t = PlannerConfig::default().hold_margin_m)]
     pub hold_margin: f64,
-    /// A frontier whose unknown side is an enclosed pocket, walled more than open, of at most
+    /// A frontier whose unknown side is an enclosed pocket, walled at least as much as open, of at most
     /// this area is not explored (the inside of a pillar seen from all sides but one), m²; 0:
     /// every frontier is.
     #[arg(long, value_name = "M2", default_value_t = PlannerConfig::default().max_pocket_m2)]

@@ -51,7 +51,7 @@ pub struct PlanArgs {
     /// spread one to a region first, metres; 0: off.
     #[arg(long, value_name = "METRES", default_value_t = PlannerConfig::default().region_radius_m)]
     region_radius: f64,
-    /// A frontier whose unknown side is an enclosed pocket, walled more than open, of at most
+    /// A frontier whose unknown side is an enclosed pocket, walled at least as much as open, of at most
     /// this area is ignored, m²; 0: none is.
     #[arg(long, value_name = "M2", default_value_t = PlannerConfig::default().max_pocket_m2)]
     max_pocket: f64,

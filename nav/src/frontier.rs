@@ -100,9 +100,9 @@ pub fn frontiers(grid: &Grid, limits: &FrontierLimits) -> Vec<Frontier> {
 }
 
 /// Whether all the unknown next to the frontier cells `cells` lies in pockets of at most
-/// `max_cells` cells in all, walled more than open: regions of unknown (8-connected) enclosed
-/// by cells the map knows, clear of its edge (beyond which the unknown goes on), and bordered
-/// by at least as many occupied cell sides as free ones. The inside of a pillar or of a piece
+/// `max_cells` cells in all, walled at least as much as open: regions of unknown (8-connected)
+/// enclosed by cells the map knows, clear of its edge (beyond which the unknown goes on), and
+/// bordered by at least as many occupied cell sides as free ones. The inside of a pillar or of a piece
 /// of furniture seen from every side but one is such a pocket: a robot sent to look at it sees
 /// a face of it, not a room (in SITL, the apartment's pillar sent a drone into the 0.8 m gap
 /// beside it in nearly every mission, often last, while the others had landed). A patch of
