@@ -15,8 +15,7 @@
 //! the memory already holds the walls behind it.
 //!
 //! A depth camera measures nothing nearer than its minimum range (0.4 m for a Kinect): a
-//! direction that was near and now shows nothing is taken to be nearer still (0.35 m from the
-//! body's centre), not clear.
+//! direction that was near and now shows nothing is taken to be nearer still, not clear.
 
 use crate::Grid;
 use crate::avoid::walls_near;
@@ -41,13 +40,8 @@ pub struct ProximityConfig {
     /// …up to this much stick.
     pub max: f64,
     /// A direction ranged nearer than this that then shows nothing is taken as too near to
-    /// measure (the camera's minimum range plus a little), metres…
+    /// measure (the camera's minimum range plus a little), metres.
     pub near_m: f64,
-    /// …and is taken to be this near the body's centre, metres: between touching and the
-    /// camera's minimum range, so the lean grows once the drone has drifted too near a wall
-    /// to range it (kept at its last range, the lean stayed at what balances a gust while a
-    /// blind drone drifted on at 0.1–0.15 m/s into the wall its camera faced).
-    pub unmeasured_m: f64,
     /// [`map_readings`] range the map's walls this far, metres.
     pub map_reach_m: f64,
 }
@@ -67,7 +61,6 @@ impl Default for ProximityConfig {
             gain: 0.25,
             max: 0.1,
             near_m: 0.7,
-            unmeasured_m: 0.35,
             map_reach_m: 1.0,
         }
     }
@@ -208,9 +201,7 @@ impl Proximity {
                 Some(Some(range)) => *slot = Some((range, stamp)),
                 // Near before and nothing now: nearer than the camera measures.
                 Some(None) => match *slot {
-                    Some((range, _)) if range < config.near_m => {
-                        *slot = Some((range.min(config.unmeasured_m), stamp));
-                    }
+                    Some((range, _)) if range < config.near_m => *slot = Some((range, stamp)),
                     _ => *slot = None,
                 },
             }
@@ -439,17 +430,10 @@ mod tests {
         // Near, then nothing for longer than a range is kept: still pushed away.
         let mut p = Proximity::new(&config);
         p.observe(0.0, 0.0, &readings(wall_ahead(0.5), FOV, &config), &config);
-        let ranged = p.push(0.1, 0.0, &config)[0];
         for t in 1..=8 {
             p.observe(f64::from(t), 0.0, &nothing, &config);
         }
-        let unranged = p.push(8.1, 0.0, &config)[0];
-        // And harder than while it was ranged: it may have drifted on toward the wall since.
-        assert!(
-            unranged < ranged - 0.02,
-            "leans back harder once too near to range: {ranged} → {unranged}"
-        );
-        assert_eq!(p.nearest(8.1, &config), Some(config.unmeasured_m));
+        assert!(p.push(8.1, 0.0, &config)[0] < -0.01);
         // Far, then nothing (beyond the camera's range): clear.
         let mut q = Proximity::new(&config);
         q.observe(0.0, 0.0, &readings(wall_ahead(1.5), FOV, &config), &config);
