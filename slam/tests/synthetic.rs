@@ -47,8 +47,11 @@ struct Flight {
     heading_bias: Option<f64>,
     /// The heading is read while steady (not lagging the camera): a prior on the map.
     heading_steady: bool,
-    /// The depth camera reads nothing (covered, or facing a bare wall too close).
+    /// The camera sees nothing (covered, or facing a bare wall too close): no colour, no depth.
     blind: bool,
+    /// The depth camera reads nothing while the colour camera sees (every wall beyond its
+    /// range).
+    no_depth: bool,
     /// Added to the IMU's roll, radians (`None`: no roll and pitch given).
     roll_bias: Option<f64>,
 }
@@ -103,6 +106,7 @@ impl Flight {
             heading_bias: Some(0.0),
             heading_steady: true,
             blind: false,
+            no_depth: false,
             roll_bias: Some(0.0),
         }
     }
@@ -151,6 +155,11 @@ impl Flight {
             let readings = self.sim.sense(k).expect("vehicle");
             let rgb = image::RgbImage::from_raw(f.frame.width, f.frame.height, f.frame.rgb.clone())
                 .expect("rgb");
+            let grey = if self.blind {
+                image::GrayImage::new(f.frame.width, f.frame.height)
+            } else {
+                image::DynamicImage::ImageRgb8(rgb).into_luma8()
+            };
             let i = f.frame.intrinsics;
             let t = f.frame.stamp.as_secs_f64();
             let report = self
@@ -158,8 +167,8 @@ impl Flight {
                 .process(Frame {
                     robot: k,
                     stamp: t,
-                    grey: image::DynamicImage::ImageRgb8(rgb).into_luma8(),
-                    depth: if self.blind {
+                    grey,
+                    depth: if self.blind || self.no_depth {
                         vec![0; f.frame.depth_mm.len()]
                     } else {
                         f.frame.depth_mm.clone()
@@ -397,6 +406,41 @@ fn only_a_steady_heading_is_a_prior_on_the_map() {
     // Measured: 3.1° with the priors, 0.5° without (the camera's own drift over the turn).
     assert!(pulled > 2.0, "{pulled:.2}°: the priors should pull the map");
     assert!(free.abs() < 1.0, "{free:.2}°: nothing should pull the map");
+}
+
+#[test]
+fn a_vehicle_whose_depth_camera_reads_nothing_is_tracked_on_the_map_by_projection() {
+    // Half a turn with depth, then the turn back with the depth camera reading nothing (as
+    // with every wall beyond its range) while the colour camera still sees: the map's points,
+    // seen with depth on the way out, place the frames on their pixels. Without that the
+    // vehicle would be lost for the whole way back.
+    let mut f = Flight::new(1, &[true], SlamConfig::default());
+    f.predicted_height_error = Some(0.0);
+    let (x, y, yaw) = start_of(&f, 0);
+    let route = turn(x, y, 1.0, yaw);
+    f.fly(&[route[..7].to_vec()], 40.0);
+    assert_eq!(f.lost[0], 0, "{:?}", f.lost_why);
+    let (keyframes, frames_before, tracked_before) =
+        (f.slam.stats().keyframes, f.frames[0], f.tracked[0]);
+    f.no_depth = true;
+    let back: Vec<Waypoint> = route[..7].iter().rev().copied().collect();
+    f.fly(&[back], 40.0);
+    let frames = f.frames[0] - frames_before;
+    eprintln!(
+        "{} of {frames} frames without depth lost: {:?}",
+        f.lost[0], f.lost_why
+    );
+    assert!(frames > 50, "{frames} frames");
+    assert!(f.lost[0] * 10 < frames, "{} of {frames} lost", f.lost[0]);
+    // Most of them poses to fly on (not weak: away from the motion so far).
+    let tracked = f.tracked[0] - tracked_before;
+    eprintln!("{tracked} of {frames} tracked");
+    assert!(tracked * 10 >= frames * 8, "{tracked} of {frames} tracked");
+    // No keyframe without depth; the way back on the way out's.
+    assert_eq!(f.slam.stats().keyframes, keyframes);
+    f.slam.finish();
+    let error = f.ate(0, None);
+    assert!(error < 0.05, "ATE {error:.3} m");
 }
 
 #[test]
