@@ -241,6 +241,9 @@ pub struct DroneSummary {
     pub lost_frames: usize,
     /// Of those, frames whose motion visual odometry measured (the drone flew on it).
     pub odometry_frames: usize,
+    /// Frames the SLAM placed on features without depth (walls beyond the depth camera's range
+    /// or nearer than its minimum), by projecting the map's points.
+    pub projection_frames: usize,
     /// Wall collisions.
     pub collisions: u32,
     /// Charged batteries it took off again on (`--battery-swap`).
@@ -729,6 +732,10 @@ fn watch(
                         .then(|| (flight_error[k].0 / flight_error[k].1 as f64).sqrt()),
                     lost_frames: perception.slam.estimate(k).map_or(0, |e| e.lost_frames),
                     odometry_frames: perception.slam.estimate(k).map_or(0, |e| e.odometry_frames),
+                    projection_frames: perception
+                        .slam
+                        .estimate(k)
+                        .map_or(0, |e| e.projection_frames),
                     collisions: collisions[k],
                     battery_swaps: report.drones[k].battery_swaps,
                     battery_left_pct: battery_left[k],

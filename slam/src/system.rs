@@ -444,6 +444,8 @@ pub struct RobotEstimate {
     pub lost_frames: usize,
     /// Of those, frames whose motion since the previous frame visual odometry measured.
     pub odometry_frames: usize,
+    /// Frames placed on features without depth ([`crate::frontend::track_by_projection`]).
+    pub projection_frames: usize,
     /// Keyframes in the graph.
     pub keyframes: usize,
 }
@@ -592,6 +594,7 @@ struct Robot {
     frames: usize,
     lost_frames: usize,
     odometry_frames: usize,
+    projection_frames: usize,
     /// Some frame came with an IMU heading (a vehicle, not a hand-held camera).
     has_imu: bool,
     /// Every tracked frame: time, reference keyframe, camera relative to it.
@@ -792,6 +795,7 @@ impl Slam {
                     frames: 0,
                     lost_frames: 0,
                     odometry_frames: 0,
+                    projection_frames: 0,
                     lost_last: None,
                     has_imu: false,
                     track: vec![],
@@ -872,6 +876,7 @@ impl Slam {
             frames: r.frames,
             lost_frames: r.lost_frames,
             odometry_frames: r.odometry_frames,
+            projection_frames: r.projection_frames,
             keyframes: r.nodes.len(),
         })
     }
@@ -1429,6 +1434,7 @@ impl Slam {
             }
         };
         let pose = self.nodes[anchor].pose * anchor_from_camera;
+        r.projection_frames += usize::from(reg.without_depth > 0);
         // On a vehicle (a caller that predicts the body, i.e. has a filter to fly on between
         // fixes), a weak registration that disagrees with the motion so far gives this frame its
         // pose but nothing to build on: it becomes neither the next frame's reference nor a

@@ -436,6 +436,11 @@ fn a_vehicle_whose_depth_camera_reads_nothing_is_tracked_on_the_map_by_projectio
     let tracked = f.tracked[0] - tracked_before;
     eprintln!("{tracked} of {frames} tracked");
     assert!(tracked * 10 >= frames * 8, "{tracked} of {frames} tracked");
+    let placed = f.slam.estimate(0).map_or(0, |e| e.projection_frames);
+    assert!(
+        placed + f.lost[0] >= frames,
+        "{placed} placed by projection"
+    );
     // No keyframe without depth; the way back on the way out's.
     assert_eq!(f.slam.stats().keyframes, keyframes);
     f.slam.finish();
