@@ -1299,10 +1299,12 @@ impl Slam {
                             off(a).total_cmp(&off(b))
                         })
                         .unwrap_or(reference);
-                    let against = self
-                        .local_map(base, &p)
-                        .map(Arc::new)
-                        .unwrap_or_else(|| self.nodes[base].observation.clone());
+                    let local = if base == reference {
+                        local
+                    } else {
+                        self.local_map(base, &p).map(Arc::new)
+                    };
+                    let against = local.unwrap_or_else(|| self.nodes[base].observation.clone());
                     let guess = self.nodes[base].pose.inverse() * p;
                     match track_by_projection(&against, &observation, &guess, frontend) {
                         Ok(reg) => found = Some((Some(base), reg)),
