@@ -78,7 +78,8 @@ pub struct SlamConfig {
     pub loop_angle: f64,
     /// At most this many loop-closure candidates are verified per keyframe.
     pub loop_candidates: usize,
-    /// Keyframes of the robot's own last this-many are not loop-closure candidates.
+    /// Keyframes of the robot's own last this-many are not loop-closure candidates (12 at the
+    /// 8° spacing: the last 96° of a turn on the spot).
     pub loop_skip_recent: usize,
     /// A loop closure needs this many inliers.
     pub loop_min_inliers: usize,
@@ -201,14 +202,14 @@ impl Default for SlamConfig {
             local_map_keyframes: 5,
             local_map_radius: 2.0,
             keyframe_translation: 0.15,
-            keyframe_rotation: 12f64.to_radians(),
+            keyframe_rotation: 8f64.to_radians(),
             max_frame_translation: 0.5,
             max_frame_rotation: 45f64.to_radians(),
             recent_links: 2,
             loop_radius: 2.0,
             loop_angle: 50f64.to_radians(),
             loop_candidates: 3,
-            loop_skip_recent: 8,
+            loop_skip_recent: 12,
             loop_min_inliers: 25,
             keyframe_min_inliers: 25,
             weak_agreement: (0.03, 1f64.to_radians()),
@@ -528,6 +529,21 @@ struct Node {
     heading: Option<f64>,
     observation: Arc<Observation>,
     cloud: Arc<Vec<Point3<f32>>>,
+}
+
+/// How far a keyframe at `other` (camera to frame) is from one at `new` in place and in view,
+/// each as a share of its bound ([`SlamConfig::loop_radius`], [`SlamConfig::loop_angle`]); `None`
+/// beyond either. Loop-closure candidates are tried lowest first: a drone turning on the spot has
+/// many keyframes within reach, and only those looking the same way see the same things.
+fn loop_candidate_rank(
+    config: &SlamConfig,
+    new: &Isometry3<f64>,
+    other: &Isometry3<f64>,
+) -> Option<f64> {
+    let distance = (other.translation.vector - new.translation.vector).norm();
+    let angle = (other.rotation * Vector3::z()).angle(&(new.rotation * Vector3::z()));
+    (distance < config.loop_radius && angle < config.loop_angle)
+        .then(|| distance / config.loop_radius + angle / config.loop_angle)
 }
 
 /// A match between two keyframes against their IMU headings.
@@ -1654,19 +1670,14 @@ impl Slam {
             .take(self.config.loop_skip_recent + 1)
             .copied()
             .collect();
-        let here = node.pose.translation.vector;
-        let axis = node.pose.rotation * Vector3::z();
         let mut near: Vec<(f64, usize)> = self
             .nodes
             .iter()
             .enumerate()
-            .filter(|(m, o)| {
-                o.frame == node.frame
-                    && !skip.contains(m)
-                    && (o.pose.rotation * Vector3::z()).angle(&axis) < self.config.loop_angle
+            .filter(|(m, o)| o.frame == node.frame && !skip.contains(m))
+            .filter_map(|(m, o)| {
+                loop_candidate_rank(&self.config, &node.pose, &o.pose).map(|rank| (rank, m))
             })
-            .map(|(m, o)| ((o.pose.translation.vector - here).norm(), m))
-            .filter(|&(d, _)| d < self.config.loop_radius)
             .collect();
         near.sort_by(|a, b| a.0.total_cmp(&b.0));
         let linked: Vec<usize> = self
@@ -2285,6 +2296,30 @@ mod tests {
     use super::*;
     use crate::features::Descriptor;
     use nalgebra::{Matrix6, Point3, Translation3};
+
+    #[test]
+    fn loop_closure_candidates_looking_the_same_way_come_before_nearer_ones_looking_away() {
+        // A drone turning on the spot: its keyframes all lie within centimetres of each
+        // other, and those whose view overlaps the new one's are the ones to try first.
+        let config = SlamConfig::default();
+        // Cameras look along their z axis; turning about the camera's y axis turns the view.
+        let looking = |x: f64, degrees: f64| {
+            Isometry3::new(
+                Vector3::new(x, 0.0, 0.0),
+                Vector3::y() * degrees.to_radians(),
+            )
+        };
+        let new = looking(0.0, 0.0);
+        let rank = |x, degrees| loop_candidate_rank(&config, &new, &looking(x, degrees));
+        let within = |x, degrees| rank(x, degrees).expect("within reach");
+        let same_way = within(0.3, 2.0);
+        let turned_away = within(0.02, 40.0);
+        assert!(same_way < turned_away, "{same_way} against {turned_away}");
+        assert!(within(0.05, 10.0) < within(0.05, 20.0));
+        assert!(within(0.1, 0.0) < within(1.0, 0.0));
+        assert_eq!(rank(0.0, 55.0), None, "looks too far away");
+        assert_eq!(rank(2.5, 0.0), None, "too far away");
+    }
 
     #[test]
     fn a_link_from_a_degenerate_registration_still_holds_every_direction() {

@@ -172,7 +172,7 @@ pub const STEADY_WINDOW: f64 = 0.4;
 /// Whether the heading at time `t` of the time-ordered `(time, heading)` readings was steady:
 /// turning less than [`MAX_STEADY_RATE`] over [`STEADY_WINDOW`] before it and after it.
 ///
-/// Keyframes are taken mostly while turning (every 12°) and drones turn one way more than the
+/// Keyframes are taken mostly while turning (every 8°) and drones turn one way more than the
 /// other, so headings that lag the camera biased the whole map's yaw as priors (keyframe
 /// priors −0.54° off on average gave a trajectory −0.55° off). Only steady headings are priors;
 /// relocalisation and the loop-closure check take any heading the turning gate lets through.
