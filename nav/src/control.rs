@@ -2,7 +2,7 @@
 //! pose error into stick commands (seed 002 ch. 5; thesis §4.3 height PI, yaw P, pitch/roll PD).
 //! Gains are configuration; the defaults are the published ones.
 
-use crate::local::{OnPath, wrap_angle};
+use crate::local::wrap_angle;
 
 /// Gains and limits of one PID loop.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -356,54 +356,6 @@ impl PositionController {
     }
 }
 
-/// The pull back onto its path of a drone pursuing a carrot, added to the position controller's
-/// sticks. The carrot's lead sets the speed along the path, so the position loops' gain cannot
-/// rise without the drone flying faster; across the path they alone held it, at 0.3 of full stick
-/// a metre, and within 0.6 m of a wall (in every door) without damping, since there the point
-/// they steer to moves with the drone: 0.2 m off the path in a 1 m door, the drone corrected
-/// 63 % of it in 2.5 s, swinging across, and met a jamb.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct CrossTrack {
-    /// Stick per metre off the path, toward it.
-    pub kp: f64,
-    /// Stick per m/s of motion across the path, against it.
-    pub kd: f64,
-    /// At most this much stick.
-    pub max: f64,
-}
-
-impl Default for CrossTrack {
-    /// For the simulated drone: 0.25 m off the path in a door, 0.06 m off after 1.2 s, no
-    /// overshoot (the test below); in the open the position loops' derivative terms add as much
-    /// damping again.
-    fn default() -> Self {
-        Self {
-            kp: 0.8,
-            kd: 0.6,
-            max: 0.3,
-        }
-    }
-}
-
-impl CrossTrack {
-    /// The push (map frame, in stick units) on a drone at `here` moving at `velocity` (m/s)
-    /// back onto its path: toward the path by how far it is off (across the path's direction
-    /// at `on_path`), against its motion across the path. Zero on any non-finite input.
-    pub fn push(&self, here: [f64; 2], velocity: [f64; 2], on_path: &OnPath) -> [f64; 2] {
-        let [dx, dy] = on_path.direction;
-        let normal = [-dy, dx];
-        let off =
-            (on_path.nearest[0] - here[0]) * normal[0] + (on_path.nearest[1] - here[1]) * normal[1];
-        let across = velocity[0] * normal[0] + velocity[1] * normal[1];
-        let u = self.kp * off - self.kd * across;
-        if !u.is_finite() {
-            return [0.0; 2];
-        }
-        let u = u.clamp(-self.max, self.max);
-        [u * normal[0], u * normal[1]]
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -726,102 +678,5 @@ mod tests {
                 "{i}: {s:?}"
             );
         }
-    }
-
-    #[test]
-    fn the_cross_track_push_points_back_at_the_path_and_brakes_motion_across_it() {
-        let along_x = OnPath {
-            nearest: [2.0, 0.0],
-            direction: [1.0, 0.0],
-        };
-        let ct = CrossTrack::default();
-        // 0.2 m left of a path along +x, still: pushed right (−y) by 0.8 × 0.2, not along.
-        let [px, py] = ct.push([2.0, 0.2], [0.0, 0.0], &along_x);
-        assert!(px.abs() < 1e-12 && (py + 0.16).abs() < 1e-12, "{px} {py}");
-        // On the path, drifting left at 0.3 m/s while flying along at 0.8: braked across only.
-        let [px, py] = ct.push([2.0, 0.0], [0.8, 0.3], &along_x);
-        assert!(px.abs() < 1e-12 && (py + 0.18).abs() < 1e-12, "{px} {py}");
-        // Far off: at most `max`. Nonsense in: nothing out.
-        let [_, py] = ct.push([2.0, 5.0], [0.0, 0.0], &along_x);
-        assert_eq!(py, -ct.max);
-        assert_eq!(ct.push([f64::NAN, 0.0], [0.0, 0.0], &along_x), [0.0; 2]);
-        assert_eq!(
-            ct.push([2.0, 0.2], [0.0, f64::INFINITY], &along_x),
-            [0.0; 2]
-        );
-    }
-
-    /// A drone flown along +x at y = 0 through a door, from 0.25 m to the left of the path, by
-    /// the mission runtime's x/y loops steering to a point 0.2 m from the drone toward its
-    /// carrot (as `keep_clear` steers within 0.6 m of a wall: it moves with the drone), plus
-    /// `cross_track`'s push. The plant is the simulated vehicle's: 20° of lean at full stick, reached with a lag
-    /// of 0.15 s, drag 0.6 /s. Returns the offsets across the path, one a tick, 4 s long.
-    fn through_a_door(cross_track: Option<CrossTrack>) -> Vec<f64> {
-        let xy = PidGains {
-            kp: 0.3,
-            ki: 0.02,
-            kd: 0.6,
-            output_limit: 0.5,
-            integral_limit: 0.3,
-        };
-        let mut pc = PositionController::new(PositionGains {
-            x: xy,
-            y: xy,
-            ..PositionGains::default()
-        });
-        let (mut p, mut v, mut lean) = ([0.0, 0.25], [0.4, 0.0], [0.0, 0.0]);
-        let mut offsets = vec![];
-        for _ in 0..40 {
-            let here = Pose3 {
-                x: p[0],
-                y: p[1],
-                z: 1.0,
-                yaw: 0.0,
-            };
-            // The carrot 0.4 m ahead on the path; the steer point 0.2 m toward it.
-            let lead = [0.4, -p[1]];
-            let f = 0.2 / lead[0].hypot(lead[1]);
-            let steer = [p[0] + f * lead[0], p[1] + f * lead[1]];
-            let setpoint = Pose3 {
-                x: steer[0],
-                y: steer[1],
-                ..here
-            };
-            let c = pc.update(&setpoint, &here, 0.1);
-            // Facing +x: pitch pushes +x, roll (+ right) pushes −y.
-            let mut push = [c.pitch, -c.roll];
-            if let Some(ct) = cross_track {
-                let on_path = OnPath {
-                    nearest: [p[0], 0.0],
-                    direction: [1.0, 0.0],
-                };
-                let [x, y] = ct.push(p, v, &on_path);
-                push = [push[0] + x, push[1] + y];
-            }
-            for _ in 0..20 {
-                let h = 0.005;
-                for k in 0..2 {
-                    lean[k] += (push[k].clamp(-1.0, 1.0) * 20f64.to_radians() - lean[k]) * h / 0.15;
-                    let a = 9.81 * lean[k].tan() - 0.6 * v[k];
-                    v[k] += a * h;
-                    p[k] += v[k] * h;
-                }
-            }
-            offsets.push(p[1]);
-        }
-        offsets
-    }
-
-    #[test]
-    fn a_drone_off_its_path_in_a_door_is_pulled_back_onto_it_without_swinging_across() {
-        let without = through_a_door(None);
-        let with = through_a_door(Some(CrossTrack::default()));
-        // Without: still 0.15 m off after 2 s (0.25 m to start with).
-        assert!(without[19] > 0.12, "{without:?}");
-        // With: within 5 cm after 1.5 s, never past the path by more than 2 cm, within 3 cm
-        // from 2 s on.
-        assert!(with[14] < 0.05, "{with:?}");
-        assert!(with.iter().all(|&y| y > -0.02), "{with:?}");
-        assert!(with[19..].iter().all(|y| y.abs() < 0.03), "{with:?}");
     }
 }

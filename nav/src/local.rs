@@ -170,22 +170,9 @@ pub enum Follow {
         carrot: [f64; 2],
         /// Heading, radians.
         yaw: f64,
-        /// Where the drone is against the path (`None` on a path of one point, which has no
-        /// direction): for a pull back onto it ([`crate::control::CrossTrack`]).
-        on_path: Option<OnPath>,
     },
     /// The end of the path has been reached.
     Arrived,
-}
-
-/// The point of a path nearest a drone, and the path's direction there.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct OnPath {
-    /// The nearest point of the path, map frame, metres.
-    pub nearest: [f64; 2],
-    /// The path's direction at `nearest`: a unit vector, map frame (at a corner the drone has
-    /// gone past, the next segment's).
-    pub direction: [f64; 2],
 }
 
 /// Algorithm 7 for a drone with position control: turn first when the path bends away, then
@@ -235,7 +222,7 @@ impl PathFollower {
             return Follow::Arrived;
         }
         if self.path.len() == 1 {
-            return self.aim(pose, first, first, None);
+            return self.aim(pose, first, first);
         }
         // Progress: the nearest point on the segments from the current one on (never backwards).
         let (mut best, mut best_d, mut best_t) = (self.segment, f64::INFINITY, 0.0);
@@ -268,27 +255,10 @@ impl PathFollower {
             left = (left - len).min(self.config.corner_m);
             from = to;
         }
-        // Past the end of its segment (overshooting a corner), the drone is off the next one.
-        let (from, to) = if best_t >= 1.0 && best + 2 < self.path.len() {
-            (b, self.path[best + 2])
-        } else {
-            (a, b)
-        };
-        let length = dist(from, to);
-        let on_path = (length > 1e-9).then(|| OnPath {
-            nearest,
-            direction: [(to[0] - from[0]) / length, (to[1] - from[1]) / length],
-        });
-        self.aim(pose, nearest, carrot, on_path)
+        self.aim(pose, nearest, carrot)
     }
 
-    fn aim(
-        &mut self,
-        pose: Pose2,
-        nearest: [f64; 2],
-        carrot: [f64; 2],
-        on_path: Option<OnPath>,
-    ) -> Follow {
+    fn aim(&mut self, pose: Pose2, nearest: [f64; 2], carrot: [f64; 2]) -> Follow {
         let (dx, dy) = (carrot[0] - pose.x, carrot[1] - pose.y);
         let yaw = dy.atan2(dx);
         let error = wrap_angle(yaw - pose.yaw).abs();
@@ -300,11 +270,7 @@ impl PathFollower {
         if self.turning {
             Follow::Turn { at: nearest, yaw }
         } else {
-            Follow::Track {
-                carrot,
-                yaw,
-                on_path,
-            }
+            Follow::Track { carrot, yaw }
         }
     }
 }
@@ -470,32 +436,6 @@ mod tests {
             c => panic!("{c:?}"),
         }
         assert_eq!(f.step(pose(4.0, 3.8, FRAC_PI_2)), Follow::Arrived);
-    }
-
-    #[test]
-    fn a_tracked_path_tells_where_the_drone_is_off_it_and_past_a_corner_the_next_segment_does() {
-        let mut f = PathFollower::new(FollowerConfig::default());
-        f.set_path(vec![[0.0, 0.0], [4.0, 0.0], [4.0, 4.0]]);
-        let on_path = |follow| match follow {
-            Follow::Track { on_path, .. } => on_path,
-            c => panic!("{c:?}"),
-        };
-        // 0.1 m left of the first segment: its nearest point, its direction.
-        let p = on_path(f.step(pose(1.0, 0.1, 0.0))).expect("a direction");
-        assert!(
-            p.nearest == [1.0, 0.0] && p.direction == [1.0, 0.0],
-            "{p:?}"
-        );
-        // 0.2 m past the corner and 0.1 m short of the second segment's start: the nearest
-        // point is the first segment's end, but the drone is off the second, which runs +y.
-        let p = on_path(f.step(pose(4.2, -0.1, 2.0))).expect("a direction");
-        assert!(
-            p.nearest == [4.0, 0.0] && p.direction == [0.0, 1.0],
-            "{p:?}"
-        );
-        // A path of one point has no direction.
-        f.set_path(vec![[1.0, 0.0]]);
-        assert_eq!(on_path(f.step(pose(0.0, 0.0, 0.0))), None);
     }
 
     #[test]

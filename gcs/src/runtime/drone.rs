@@ -10,8 +10,8 @@ use link::{Command, CommandError, FlightMode, LinkState, Sticks, Telemetry, Vehi
 use nalgebra::Isometry3;
 use nav::Grid;
 use nav::avoid::{KeepClear, brake_toward_walls, keep_clear};
-use nav::control::{CrossTrack, PidGains, Pose3, PositionController, PositionGains};
-use nav::local::{Follow, FollowerConfig, OnPath, PathFollower, Pose2, wrap_angle};
+use nav::control::{PidGains, Pose3, PositionController, PositionGains};
+use nav::local::{Follow, FollowerConfig, PathFollower, Pose2, wrap_angle};
 use nav::mission::SAME_FRONTIER_M;
 use nav::proximity::{Proximity, ProximityConfig};
 use nav::sweep::{self, View};
@@ -109,9 +109,6 @@ pub struct DroneConfig {
     pub gains: PositionGains,
     /// Path follower.
     pub follower: FollowerConfig,
-    /// Pursuing a carrot, the drone is also pulled back onto its path ([`CrossTrack`]);
-    /// `None`: by the position controller alone.
-    pub cross_track: Option<CrossTrack>,
     /// Pose filter.
     pub ekf: EkfConfig,
     /// Holding still (a look around, a turn, a hover), an error under this is not flown: the
@@ -244,7 +241,6 @@ impl Default for DroneConfig {
                 turn_threshold_rad: 90f64.to_radians(),
                 ..FollowerConfig::default()
             },
-            cross_track: Some(CrossTrack::default()),
             ekf: EkfConfig::default(),
             hold_band_m: 0.1,
             keep_clear: KeepClear::default(),
@@ -461,8 +457,6 @@ pub struct Drone {
     hold: [f64; 2],
     /// Pursuing a carrot along a path this tick (not holding still).
     tracking: bool,
-    /// Where the drone is against the path it pursues this tick, if that has a direction.
-    on_path: Option<OnPath>,
     /// Paths given to the follower so far…
     paths: u64,
     /// …and what the position controller flew to last tick.
@@ -579,7 +573,6 @@ impl Drone {
             scan: None,
             hold: [x, y],
             tracking: false,
-            on_path: None,
             paths: 0,
             flown: None,
             turning: false,
@@ -1246,7 +1239,6 @@ impl Drone {
         self.blind_since = None;
         self.blind_drift = Drift::default();
         self.tracking = false;
-        self.on_path = None;
         let here = [pose[0], pose[1]];
         // The map's walls all round, for the moment it goes blind (the camera sees only ahead).
         if let (Some(map), Some(heading)) = (&self.map, telemetry.yaw_rad) {
@@ -1356,19 +1348,10 @@ impl Drone {
         // An approach to a wall faster than can stop short of it is braked: `keep_clear`'s
         // steer point moves with the drone, so the derivative terms see no drift toward a
         // jamb while pursuing a carrot.
-        let velocity = self.ekf.valid_velocity();
-        let brake = self
-            .map
-            .as_ref()
-            .zip(velocity)
-            .map(|(map, v)| brake_toward_walls(map, here, v, &config.keep_clear));
-        // Pursuing a carrot, pulled back onto the path: the controller's loops, which set the
-        // speed along it, hold the drone across it too loosely (in a door, not at all).
-        let pull = (config.cross_track.zip(self.on_path).zip(velocity))
-            .map(|((ct, on_path), v)| ct.push(here, v, &on_path));
-        for [px, py] in brake.into_iter().chain(pull) {
+        if let (Some(map), Some(velocity)) = (&self.map, self.ekf.valid_velocity()) {
+            let [bx, by] = brake_toward_walls(map, here, velocity, &config.keep_clear);
             let (s, co) = estimate.yaw.sin_cos();
-            let (forward, left) = (co * px + s * py, -s * px + co * py);
+            let (forward, left) = (co * bx + s * by, -s * bx + co * by);
             c.pitch = (c.pitch + forward).clamp(-1.0, 1.0);
             c.roll = (c.roll - left).clamp(-1.0, 1.0);
         }
@@ -1514,13 +1497,8 @@ impl Drone {
                 self.turning = true;
                 self.yaw_goal = yaw;
             }
-            Follow::Track {
-                carrot,
-                yaw,
-                on_path,
-            } => {
+            Follow::Track { carrot, yaw } => {
                 self.tracking = true;
-                self.on_path = on_path;
                 self.turning = false;
                 self.hold = carrot;
                 self.yaw_goal = yaw;
@@ -2032,45 +2010,6 @@ mod tests {
         // more.
         let (braked, not) = (last_roll(&config), last_roll(&unbraked));
         assert!(braked > not + 0.05, "braked {braked}, not {not}");
-    }
-
-    #[test]
-    fn a_drone_off_its_path_through_a_door_is_pulled_back_onto_it() {
-        // A door 1 m wide (y −0.5 to 0.5) in a wall across x = 1, the path east through its
-        // middle; the drone 0.2 m north of the path, drifting further north at 0.1 m/s, 0.3 m
-        // from the jamb: within 0.6 m of it `keep_clear` leads by 0.2 m from the drone.
-        let mut map = Grid::new(60, 40, 0.05, [-1.0, -1.0], nav::Cell::Free);
-        for y in 0..40 {
-            if !(10..30).contains(&y) {
-                map.set((40, y), nav::Cell::Occupied); // x = 1.00–1.05
-            }
-        }
-        let map = Arc::new(map);
-        let last_roll = |config: &DroneConfig| {
-            let mut drone = exploring_drone(Arc::default(), config);
-            drone.set_map(map.clone());
-            drone.set_plan(Some([1.9, 0.0]), vec![[0.0, 0.0], [1.9, 0.0]], None, 0.0);
-            for i in 1..=6 {
-                let t = 0.1 * f64::from(i);
-                drone.slam_fix(t, [0.45 + 0.3 * t, 0.14 + 0.1 * t, 0.9], 0.0, None, false);
-                drone.tick(t, config);
-            }
-            assert!(drone.tracking, "pursuing its carrot");
-            f64::from(drone.sticks.expect("sticks").roll)
-        };
-        let config = DroneConfig::default();
-        let alone = DroneConfig {
-            cross_track: None,
-            ..config.clone()
-        };
-        // Facing east, a bank right is a push south, back to the path: 0.8 × 0.2 m and
-        // 0.6 × 0.1 m/s would be 0.22 more; the filter's estimate, which lags the fixes, gives
-        // 0.13 (0.18 against 0.05).
-        let (pulled, not) = (last_roll(&config), last_roll(&alone));
-        assert!(
-            pulled > not + 0.1,
-            "pulled {pulled}, by the controller alone {not}"
-        );
     }
 
     #[test]
