@@ -153,6 +153,10 @@ pub struct PlannedGoal {
     pub held: Option<[f64; 2]>,
     /// The frontier goal it was given, if any.
     pub goal: Option<[f64; 2]>,
+    /// The path planned to it (x, y waypoints, map frame), which it then followed; absent from
+    /// older logs and without a goal.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub path: Vec<[f64; 2]>,
 }
 
 fn one_based<S: serde::Serializer>(k: &usize, s: S) -> Result<S::Ok, S::Error> {

@@ -494,6 +494,7 @@ mod tests {
                 position: robots[0],
                 held: None,
                 goal,
+                path: vec![],
             }],
             given_up,
         };

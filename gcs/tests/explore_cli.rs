@@ -65,6 +65,17 @@ fn mcap_texts(path: &Path, topic: &str) -> Vec<String> {
         .collect()
 }
 
+/// The messages of a JSON topic of an MCAP file.
+fn mcap_json(path: &Path, topic: &str) -> Vec<serde_json::Value> {
+    let bytes = std::fs::read(path).expect("mission.mcap");
+    mcap::MessageStream::new(&bytes)
+        .expect("an MCAP file")
+        .map(|m| m.expect("a readable message"))
+        .filter(|m| m.channel.topic == topic)
+        .map(|m| serde_json::from_slice(&m.data).expect("JSON"))
+        .collect()
+}
+
 #[test]
 fn two_drones_explore_the_default_world_land_and_write_their_outputs() {
     // Navigation on the simulator's poses (the SLAM maps on them): the map must be complete.
@@ -165,6 +176,23 @@ fn two_drones_explore_the_default_world_land_and_write_their_outputs() {
         );
     }
     assert!(messages > 1000, "{messages} messages");
+    // Each decision with the path to each goal: from the drone (or the free cell nearest it,
+    // up to a metre off) to where it looks around (within 1.5 m of its goal).
+    let goals: Vec<serde_json::Value> = mcap_json(&out.join("mission.mcap"), "/plan")
+        .iter()
+        .flat_map(|plan| plan["goals"].as_array().cloned().unwrap_or_default())
+        .filter(|g| g["goal"].is_array())
+        .collect();
+    assert!(!goals.is_empty(), "no decision gave a goal");
+    let point = |v: &serde_json::Value| [number(&v[0]), number(&v[1])];
+    let apart = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).hypot(a[1] - b[1]);
+    for g in &goals {
+        let path = g["path"].as_array().filter(|p| !p.is_empty());
+        let path = path.unwrap_or_else(|| panic!("no path to the goal: {g}"));
+        let (first, last) = (point(&path[0]), point(&path[path.len() - 1]));
+        assert!(apart(first, point(&g["position"])) <= 1.0, "{g}");
+        assert!(apart(last, point(&g["goal"])) <= 1.6, "{g}");
+    }
     let said = mcap_texts(&out.join("mission.mcap"), "/station");
     for text in [
         "drone 1: armed: taking off",

@@ -143,6 +143,11 @@ pub struct SlamConfig {
     /// repeated texture, taken 0.3 s after a drone was lost, put its pose there for the rest of
     /// the mission, and it pressed into the wall ten times.
     pub relocalisation_gate_min_m: f64,
+    /// A relocalisation facing further than this from the heading the vehicle's IMU reads
+    /// (steady or turning) is a look-alike place, radians. Over 611 findings of a lost drone
+    /// in SITL, the right ones faced within 9.4° of the truth half a second on (median 1.8°),
+    /// the wrong ones (0.7–1.1 m off, one kept for the rest of its mission) 17–20°.
+    pub relocalisation_heading_gate: f64,
     /// While lost, consecutive frames at most this far apart (seconds) are registered on each
     /// other for [`Odometry`]…
     pub odometry_max_gap: f64,
@@ -229,6 +234,7 @@ impl Default for SlamConfig {
             relocalisation_drift_mps: 0.3,
             relocalisation_gate_sigmas: 3.0,
             relocalisation_gate_min_m: 0.3,
+            relocalisation_heading_gate: 12f64.to_radians(),
             odometry_max_gap: 0.5,
             odometry_min_inliers: 15,
             link_sigma: (0.01, 0.5f64.to_radians()),
@@ -1409,7 +1415,22 @@ impl Slam {
                             let d = p.inverse() * pose;
                             (d.translation.vector.norm(), d.rotation.angle())
                         });
+                        // How far from the IMU's heading, radians.
+                        let off_heading =
+                            frame.heading.or(frame.turning_heading).map_or(0.0, |psi| {
+                                wrap(body_yaw(&pose, &camera_from_body) - psi).abs()
+                            });
+                        let max_heading = self.config.relocalisation_heading_gate;
                         match self.implausible(frame, &pose) {
+                            None if off_heading > max_heading => add_reason(
+                                &mut why,
+                                format!(
+                                    "keyframe {n}: facing {:.0}° from the IMU's heading \
+                                     (gate {:.0}°)",
+                                    off_heading.to_degrees(),
+                                    max_heading.to_degrees()
+                                ),
+                            ),
                             None if off_t < max_t && off_r < max_r => {
                                 found = Some((Some(n), reg));
                                 relocalised = Some(n);

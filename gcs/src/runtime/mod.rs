@@ -942,6 +942,7 @@ impl Mission {
                         position: answer.robots[i],
                         held: held.get(i).copied().flatten(),
                         goal: plan.robots[i].goal,
+                        path: plan.robots[i].path.clone(),
                     })
                     .collect(),
                 frontiers: self.frontiers.clone(),
