@@ -147,9 +147,105 @@ pub fn still_unknown_ahead(
     })
 }
 
+/// The ways to turn (+1 counter-clockwise, −1 clockwise) of robots that take off together and
+/// look around where they start, at `starts` (x, y, heading; map frame; `None`: unknown).
+/// Robots within `together_m` of one another see the same room, so their looks are one: each
+/// turns the way that, with the others' turns, brings every bearing into some camera's view
+/// soonest, and each look ends once the map shows nothing unknown ahead of it
+/// ([`still_unknown_ahead`]). Turning the same way from about the same heading (a tie, as every
+/// bearing is unknown at the start) two cameras see the same walls all the way round; turning
+/// apart, each sees half. A robot with no other near it, or with no start, gets `None`: its own
+/// look around decides.
+pub fn shared_turns(starts: &[Option<[f64; 3]>], together_m: f64, view: &View) -> Vec<Option<f64>> {
+    let mut turns = vec![None; starts.len()];
+    for group in groups(starts, together_m) {
+        // Every choice of ways is tried: 2^n of them, n at most MAX_SHARED.
+        for chunk in group.chunks(MAX_SHARED).filter(|c| c.len() > 1) {
+            let headings: Vec<f64> = chunk
+                .iter()
+                .filter_map(|&k| starts[k])
+                .map(|s| s[2])
+                .collect();
+            let ways = |mask: usize| -> Vec<f64> {
+                (0..chunk.len())
+                    .map(|i| if mask >> i & 1 == 0 { 1.0 } else { -1.0 })
+                    .collect()
+            };
+            // The first choice of the least turn wins: all counter-clockwise on a tie.
+            let best = (0..1usize << chunk.len())
+                .map(|mask| (shared_turn(&headings, &ways(mask), view), mask))
+                .fold((f64::INFINITY, 0), |best, next| {
+                    if next.0 < best.0 - 1e-9 { next } else { best }
+                });
+            for (&k, way) in chunk.iter().zip(ways(best.1)) {
+                turns[k] = Some(way);
+            }
+        }
+    }
+    turns
+}
+
+/// At most this many robots share one look around ([`shared_turns`] tries every choice of ways
+/// among them; a larger group is cut into groups of this many).
+pub const MAX_SHARED: usize = 10;
+
+/// How far cameras facing `headings`, each turning its way of `ways` at one rate, must turn
+/// before every bearing has been in some camera's view, radians.
+pub fn shared_turn(headings: &[f64], ways: &[f64], view: &View) -> f64 {
+    const BINS: usize = 72;
+    (0..BINS)
+        .map(|b| {
+            headings
+                .iter()
+                .zip(ways)
+                .map(|(&h, &way)| {
+                    let o = turned(bearing_of(b, BINS), h, way);
+                    if o <= view.half_fov_rad || o >= TAU - view.half_fov_rad {
+                        0.0
+                    } else {
+                        o - view.half_fov_rad
+                    }
+                })
+                .fold(f64::INFINITY, f64::min)
+        })
+        .fold(0.0, f64::max)
+}
+
+/// The robots of `starts` (their indices) in groups whose members are linked by starts within
+/// `together_m` of one another; robots without a start are in none.
+fn groups(starts: &[Option<[f64; 3]>], together_m: f64) -> Vec<Vec<usize>> {
+    let mut grouped = vec![false; starts.len()];
+    let mut groups = vec![];
+    for (k, start) in starts.iter().enumerate() {
+        if start.is_none() || grouped[k] {
+            continue;
+        }
+        grouped[k] = true;
+        let mut members = vec![k];
+        let mut next = 0;
+        while let Some(&m) = members.get(next) {
+            next += 1;
+            let Some(a) = starts[m] else { continue };
+            for (j, b) in starts.iter().enumerate() {
+                if let Some(b) = b
+                    && !grouped[j]
+                    && (a[0] - b[0]).hypot(a[1] - b[1]) <= together_m
+                {
+                    grouped[j] = true;
+                    members.push(j);
+                }
+            }
+        }
+        members.sort_unstable();
+        groups.push(members);
+    }
+    groups
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::f64::consts::PI;
 
     /// A 6 × 6 m room of known free space, walls on every side, the robot in its middle;
     /// `unknown` cells (x range, y range in metres) left unobserved.
@@ -262,6 +358,79 @@ mod tests {
         let u = unknown_bearings(&west, [0.0, 0.0], &view, 72);
         assert!(still_unknown_ahead(&u, 0.0, 1.0, 2.0, &view));
         assert!(!still_unknown_ahead(&u, 0.0, 1.0, 4.0, &view));
+    }
+
+    #[test]
+    fn robots_taking_off_together_turn_apart_and_share_one_look_around() {
+        let view = View::default();
+        let hf = view.half_fov_rad;
+        // Side by side, facing the same way: turning one way both, every bearing is in view
+        // only after a whole turn less the view; turning apart, after half of one.
+        let pair = [Some([0.0, 0.0, 1.0]), Some([1.0, 0.0, 1.0])];
+        let turns = shared_turns(&pair, 2.0, &view);
+        assert!(turns[0].is_some() && turns[1].is_some(), "{turns:?}");
+        assert_ne!(turns[0], turns[1]);
+        let step = TAU / 72.0;
+        assert!((shared_turn(&[1.0, 1.0], &[1.0, 1.0], &view) - (TAU - 2.0 * hf)).abs() < step);
+        assert!((shared_turn(&[1.0, 1.0], &[1.0, -1.0], &view) - (PI - hf)).abs() < step);
+        // The apartment's four starts (facing within 90° of one another): 106° of a turn each,
+        // where all counter-clockwise (the tie of every bearing unknown) needed 211°.
+        let headings = [1.9635, -2.7489, 1.9635, 2.3562];
+        let starts = [
+            Some([13.1, 2.1, headings[0]]),
+            Some([14.1, 2.1, headings[1]]),
+            Some([13.1, 3.3, headings[2]]),
+            Some([14.1, 3.3, headings[3]]),
+        ];
+        let ways: Vec<f64> = shared_turns(&starts, 2.0, &view)
+            .into_iter()
+            .flatten()
+            .collect();
+        assert_eq!(ways.len(), 4);
+        assert_ne!(ways[0], ways[2], "the two facing alike turn apart");
+        let together = shared_turn(&headings, &[1.0; 4], &view);
+        let shared = shared_turn(&headings, &ways, &view);
+        assert!(together > 200f64.to_radians(), "{}", together.to_degrees());
+        assert!(shared < 110f64.to_radians(), "{}", shared.to_degrees());
+        // No choice of ways does better.
+        for mask in 0..16usize {
+            let other: Vec<f64> = (0..4)
+                .map(|i| if mask >> i & 1 == 0 { 1.0 } else { -1.0 })
+                .collect();
+            assert!(shared_turn(&headings, &other, &view) >= shared - 1e-9);
+        }
+    }
+
+    #[test]
+    fn only_robots_near_one_another_share_a_look_around() {
+        let view = View::default();
+        // A lone robot, one without a start, and a chain (each within 2 m of the next, the
+        // ends 3 m apart): the chain is one group, the others decide for themselves.
+        let starts = [
+            Some([0.0, 0.0, 0.0]),
+            Some([20.0, 0.0, 0.0]),
+            None,
+            Some([1.5, 0.0, 0.0]),
+            Some([3.0, 0.0, 0.0]),
+        ];
+        let turns = shared_turns(&starts, 2.0, &view);
+        assert_eq!((turns[1], turns[2]), (None, None));
+        assert!(turns[0].is_some() && turns[3].is_some() && turns[4].is_some());
+        // Apart by more than `together_m`, nobody shares.
+        assert_eq!(shared_turns(&starts, 1.0, &view), vec![None; 5]);
+        assert!(shared_turns(&[], 2.0, &view).is_empty());
+        // A group larger than MAX_SHARED is cut into groups that each turn apart.
+        let crowd: Vec<Option<[f64; 3]>> = (0..MAX_SHARED + 3)
+            .map(|k| Some([0.1 * k as f64, 0.0, 0.0]))
+            .collect();
+        let turns = shared_turns(&crowd, 2.0, &view);
+        assert!(turns.iter().all(Option::is_some));
+        for chunk in turns.chunks(MAX_SHARED) {
+            assert!(
+                chunk.contains(&Some(1.0)) && chunk.contains(&Some(-1.0)),
+                "{chunk:?}"
+            );
+        }
     }
 
     #[test]

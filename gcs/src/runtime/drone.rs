@@ -138,6 +138,12 @@ pub struct DroneConfig {
     pub sweep: Option<View>,
     /// ... but lasts at least this long, seconds (the map lags the camera by up to a second).
     pub scan_min_s: f64,
+    /// Drones whose starts lie within this distance of one another take off to one shared look
+    /// around, each turning the way that, with the others', sees every side soonest
+    /// ([`nav::sweep::shared_turns`]), metres; 0: each turns its own way (every bearing is
+    /// unknown at the start, so all turned counter-clockwise, and the four drones of the
+    /// apartment's hall, facing within 90° of one another, looked at the same walls for 7 s).
+    pub look_together_m: f64,
     /// A look around the SLAM loses the drone in goes on once it is found again, from the
     /// bearing where it was lost, while its losses add up to no more than this, seconds; a
     /// longer loss cuts it short ([`DroneEvent::LookCut`]). (In SITL, looks at the apartment's
@@ -249,6 +255,7 @@ impl Default for DroneConfig {
             scan_s: 10.0,
             sweep: Some(View::default()),
             scan_min_s: 2.0,
+            look_together_m: 2.0,
             look_lost_s: 1.5,
             look_slow_inliers: 60,
             blind_yaw: 0.2,
@@ -449,6 +456,9 @@ pub struct Drone {
     /// The way its look around at `goal` must turn (+1 counter-clockwise, −1 clockwise), set by
     /// the mission; `None`: the short way to the unknown.
     look_turn: Option<f64>,
+    /// The way its look around at take-off turns, shared with the drones that take off beside
+    /// it ([`Drone::share_first_look`]); `None`: the short way to the unknown.
+    first_look_turn: Option<f64>,
     /// The stuck clock: since when, and from where, it has not moved 0.3 m.
     progress: (f64, [f64; 2]),
     /// The frontier goal the stuck clock runs for, and when the planner last gave it.
@@ -568,6 +578,7 @@ impl Drone {
             controller: PositionController::new(config.gains),
             goal: None,
             look_turn: None,
+            first_look_turn: None,
             progress: (t, [x, y]),
             clocked_goal: None,
             scan: None,
@@ -803,6 +814,13 @@ impl Drone {
     pub fn disarm(&mut self) {
         self.link.set_sticks(None);
         self.send(Command::Disarm);
+    }
+
+    /// The way (+1 counter-clockwise, −1 clockwise) its first look around, at take-off, turns:
+    /// its part of a look around shared with the drones taking off beside it
+    /// ([`nav::sweep::shared_turns`]). A later take-off (after a battery swap) looks its own way.
+    pub fn share_first_look(&mut self, direction: f64) {
+        self.first_look_turn = Some(direction.signum());
     }
 
     /// A new frontier goal and path from the mission planner (exploring drones only), and the
@@ -1282,7 +1300,11 @@ impl Drone {
                 if pose[2] > self.altitude - 0.1 {
                     // Airborne: look around once, so the first plan sees every side.
                     self.phase = Phase::Exploring;
-                    self.scan = Some(self.look_around(now, pose, None, config));
+                    let mut scan = self.look_around(now, pose, None, config);
+                    if let Some(turn) = self.first_look_turn.take() {
+                        scan.direction = turn;
+                    }
+                    self.scan = Some(scan);
                     self.progress = (now, here);
                 }
             }
@@ -2649,6 +2671,39 @@ mod tests {
             yaw >= std::f64::consts::TAU - 2.0 * half_fov,
             "a whole turn: {yaw} rad"
         );
+    }
+
+    #[test]
+    fn a_drone_taking_off_beside_others_turns_its_share_of_the_first_look_around() {
+        let config = DroneConfig::default();
+        // Airborne at (0, 0) facing +x where nothing is mapped yet (every side a tie), told
+        // its share or not: the heading goal two seconds into the look around that begins.
+        let turned_after_takeoff = |drone: &mut Drone, t0: f64| {
+            drone.phase = Phase::TakingOff;
+            let mut t = t0;
+            while t < t0 + 2.0 {
+                drone.slam_fix(t, [0.0, 0.0, 0.9], drone.yaw_goal, None, false);
+                drone.tick(t, &config);
+                t += 0.1;
+            }
+            assert_eq!(drone.phase, Phase::Exploring);
+            assert!(drone.scan.is_some(), "looking around");
+            drone.yaw_goal - drone.scan.map_or(0.0, |s| s.yaw0)
+        };
+        let mut alone = exploring_drone(Arc::default(), &config);
+        assert!(
+            turned_after_takeoff(&mut alone, 0.0) > 0.5,
+            "counter-clockwise on a tie"
+        );
+        let mut beside = exploring_drone(Arc::default(), &config);
+        beside.share_first_look(-1.0);
+        assert!(
+            turned_after_takeoff(&mut beside, 0.0) < -0.5,
+            "clockwise, its share"
+        );
+        // Its share was of the first look around: taking off again later, it looks its own way.
+        beside.scan = None;
+        assert!(turned_after_takeoff(&mut beside, 10.0) > 0.5);
     }
 
     #[test]

@@ -321,11 +321,21 @@ impl Runtime {
         )?;
         let planner = Planner::start(perception.map())?;
         let t0 = clock.now();
-        let drones: Vec<Drone> = drones
+        let mut drones: Vec<Drone> = drones
             .into_iter()
             .enumerate()
             .map(|(k, spec)| Drone::new(k, spec, &config.drone, t0))
             .collect();
+        if let Some(view) = config.drone.sweep {
+            // Drones that take off beside one another share their first look around.
+            let starts: Vec<Option<[f64; 3]>> = drones.iter().map(|d| d.start).collect();
+            let turns = nav::sweep::shared_turns(&starts, config.drone.look_together_m, &view);
+            for (drone, turn) in drones.iter_mut().zip(turns) {
+                if let Some(turn) = turn {
+                    drone.share_first_look(turn);
+                }
+            }
+        }
         let (commands, rx) = channel();
         let first = Snapshot {
             time: t0,
