@@ -105,6 +105,17 @@ fn turned(bearing: f64, start: f64, direction: f64) -> f64 {
     ((bearing - start) * direction).rem_euclid(TAU)
 }
 
+/// How far a camera facing `yaw` must turn in `direction` (+1 counter-clockwise, −1
+/// clockwise) before `bearing` comes into its view, radians (0: in view now).
+fn turn_to_see(bearing: f64, yaw: f64, direction: f64, view: &View) -> f64 {
+    let o = turned(bearing, yaw, direction);
+    if o <= view.half_fov_rad || o >= TAU - view.half_fov_rad {
+        0.0
+    } else {
+        o - view.half_fov_rad
+    }
+}
+
 /// The way to turn from heading `yaw` so that every bearing of `unknown` (from
 /// [`unknown_bearings`]) not in view now comes into view soonest: +1 counter-clockwise, −1
 /// clockwise (counter-clockwise on a tie).
@@ -114,9 +125,7 @@ pub fn direction(unknown: &[bool], yaw: f64, view: &View) -> f64 {
             .iter()
             .enumerate()
             .filter(|&(_, &u)| u)
-            .map(|(b, _)| turned(bearing_of(b, unknown.len()), yaw, direction))
-            .filter(|&o| o > view.half_fov_rad && o < TAU - view.half_fov_rad)
-            .map(|o| o - view.half_fov_rad)
+            .map(|(b, _)| turn_to_see(bearing_of(b, unknown.len()), yaw, direction, view))
             .fold(0.0, f64::max)
     };
     // A tie (the same turn either way, to rounding) goes counter-clockwise.
@@ -198,14 +207,7 @@ pub fn shared_turn(headings: &[f64], ways: &[f64], view: &View) -> f64 {
             headings
                 .iter()
                 .zip(ways)
-                .map(|(&h, &way)| {
-                    let o = turned(bearing_of(b, BINS), h, way);
-                    if o <= view.half_fov_rad || o >= TAU - view.half_fov_rad {
-                        0.0
-                    } else {
-                        o - view.half_fov_rad
-                    }
-                })
+                .map(|(&h, &way)| turn_to_see(bearing_of(b, BINS), h, way, view))
                 .fold(f64::INFINITY, f64::min)
         })
         .fold(0.0, f64::max)
