@@ -78,6 +78,11 @@ pub struct SimArgs {
     /// every frontier is.
     #[arg(long, value_name = "M2", default_value_t = PlannerConfig::default().max_pocket_m2)]
     pub max_pocket: f64,
+    /// What turning on the spot to face a path costs a drone when frontiers are assigned, metres
+    /// of path per radian: a frontier whose path sets off more than 90° from the way the drone
+    /// faces costs it the turn as well; 0: paths alone are weighed.
+    #[arg(long, value_name = "M_PER_RAD", default_value_t = PlannerConfig::default().turn_m_per_rad)]
+    pub turn_cost: f64,
     /// How a drone looks around at a goal: turning the short way to what the map shows
     /// unknown, no further (`sweep`), or a whole turn every time (`whole`, as the thesis).
     #[arg(long, value_enum, default_value_t = LookAround::Sweep)]
@@ -302,6 +307,12 @@ fn validate(args: &ExploreArgs) -> anyhow::Result<Vec<Fault>> {
             args.sim.hold_margin
         );
     }
+    if !(args.sim.turn_cost.is_finite() && (0.0..=10.0).contains(&args.sim.turn_cost)) {
+        bail!(
+            "--turn-cost {} must be between 0 (off) and 10 metres per radian",
+            args.sim.turn_cost
+        );
+    }
     if !(args.sim.max_pocket.is_finite() && (0.0..=100.0).contains(&args.sim.max_pocket)) {
         bail!(
             "--max-pocket {} must be between 0 (off) and 100 square metres",
@@ -447,6 +458,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
             region_radius_m: Some(args.sim.region_radius),
             hold_margin_m: Some(args.sim.hold_margin),
             max_pocket_m2: Some(args.sim.max_pocket),
+            turn_m_per_rad: Some(args.sim.turn_cost),
             drones: fleet
                 .drones
                 .iter()
@@ -475,6 +487,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
             region_radius_m: args.sim.region_radius,
             hold_margin_m: args.sim.hold_margin,
             max_pocket_m2: args.sim.max_pocket,
+            turn_m_per_rad: args.sim.turn_cost,
             timeout: Some(args.timeout),
             drone: DroneConfig {
                 sweep: match args.sim.look_around {

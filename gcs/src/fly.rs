@@ -176,6 +176,7 @@ pub fn run_with(args: &FlyArgs, window: Option<Window>) -> anyhow::Result<()> {
             region_radius_m: Some(RuntimeConfig::default().region_radius_m),
             hold_margin_m: Some(RuntimeConfig::default().hold_margin_m),
             max_pocket_m2: Some(RuntimeConfig::default().max_pocket_m2),
+            turn_m_per_rad: Some(RuntimeConfig::default().turn_m_per_rad),
             drones: fleet
                 .iter()
                 .map(|v| SetupDrone::new(&v.name, v.start, &body_from_camera, v.altitude))

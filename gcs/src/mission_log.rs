@@ -50,13 +50,15 @@ pub struct RecordedPlan {
 
 impl RecordedPlan {
     /// The mission's planner settings (`mission`, widest radius first) as they stood at this
-    /// decision: with the goals given up by then and the goals the drones held.
+    /// decision: with the goals given up by then, the goals the drones held and the ways they
+    /// faced.
     pub fn planner_configs(&self, mission: &[PlannerConfig]) -> Vec<PlannerConfig> {
         mission
             .iter()
             .map(|c| PlannerConfig {
                 blacklist: self.given_up.clone(),
                 held: self.goals.iter().map(|g| g.held).collect(),
+                headings: self.goals.iter().map(|g| g.heading).collect(),
                 ..c.clone()
             })
             .collect()
@@ -565,10 +567,12 @@ mod tests {
 
     #[test]
     fn a_recorded_decision_plans_with_what_it_had_given_up_and_the_goals_the_drones_held() {
-        // As written on `/plan`: drone 2 held no goal, and a log from before held goals has none.
+        // As written on `/plan`: drone 2 held no goal and faced no known way, and a log from
+        // before held goals and headings has neither.
         let plan: RecordedPlan = serde_json::from_str(
             r#"{"t": 12.0, "given_up": [[1.0, 2.0]], "goals": [
-                {"drone": 1, "position": [0.5, 0.5], "held": [3.0, 4.0], "goal": [3.1, 4.0]},
+                {"drone": 1, "position": [0.5, 0.5], "held": [3.0, 4.0], "heading": 1.5,
+                 "goal": [3.1, 4.0]},
                 {"drone": 2, "position": null, "goal": null}]}"#,
         )
         .expect("a recorded plan");
@@ -584,6 +588,7 @@ mod tests {
             assert_eq!(c.hold_margin_m, 0.7);
             assert_eq!(c.blacklist, vec![[1.0, 2.0]]);
             assert_eq!(c.held, vec![Some([3.0, 4.0]), None]);
+            assert_eq!(c.headings, vec![Some(1.5), None]);
         }
     }
 

@@ -225,6 +225,7 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
                     "id": g.drone + 1,
                     "position": g.position.map(|p| json!({"x": p[0], "y": p[1]})),
                     "held": g.held.map(|p| json!({"x": p[0], "y": p[1]})),
+                    "heading_deg": g.heading.map(f64::to_degrees),
                     "goal": g.goal.map(|p| json!({"x": p[0], "y": p[1]})),
                 })).collect::<Vec<_>>(),
             });
@@ -248,9 +249,11 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
             for (i, g) in d.plan.goals.iter().enumerate() {
                 writeln!(
                     stdout,
-                    "  robot {i} is drone {}: at {}, flying to {}, the mission gave it {}",
+                    "  robot {i} is drone {}: at {}{}, flying to {}, the mission gave it {}",
                     g.drone + 1,
                     place(g.position, "no position (pose invalid)"),
+                    g.heading
+                        .map_or(String::new(), |h| format!(" facing {:.0}°", h.to_degrees())),
                     place(g.held, "no goal"),
                     place(g.goal, "no goal")
                 )?;

@@ -53,6 +53,10 @@ pub struct Setup {
     /// (absent from older logs, which explored every frontier).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_pocket_m2: Option<f64>,
+    /// What turning on the spot to face a path cost a drone in the assignment, metres per
+    /// radian (absent from older logs, whose plans weighed paths alone).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub turn_m_per_rad: Option<f64>,
     /// The drones.
     pub drones: Vec<SetupDrone>,
 }
@@ -151,6 +155,10 @@ pub struct PlannedGoal {
     /// cheaper by the hold margin ([`Setup::hold_margin_m`]; absent from older logs).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub held: Option<[f64; 2]>,
+    /// The way it faced (radians, map frame), from which a path setting off behind it cost a
+    /// turn ([`Setup::turn_m_per_rad`]); absent while it looked around, and from older logs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub heading: Option<f64>,
     /// The frontier goal it was given, if any.
     pub goal: Option<[f64; 2]>,
     /// The path planned to it (x, y waypoints, map frame), which it then followed; absent from

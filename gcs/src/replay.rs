@@ -339,6 +339,8 @@ pub(crate) fn planner_configs(setup: &Setup) -> Vec<PlannerConfig> {
             hold_margin_m: setup.hold_margin_m.unwrap_or(0.0),
             // …and explored every frontier.
             max_pocket_m2: setup.max_pocket_m2.unwrap_or(0.0),
+            // …and weighed paths alone.
+            turn_m_per_rad: setup.turn_m_per_rad.unwrap_or(0.0),
             ..PlannerConfig::default()
         })
         .collect()
@@ -457,16 +459,16 @@ mod tests {
             region_radius_m: None,
             hold_margin_m: None,
             max_pocket_m2: None,
+            turn_m_per_rad: None,
             drones: vec![],
         });
         assert_eq!(configs.len(), RuntimeConfig::default().planner_radii.len());
-        // Logs from before regions, goal holding and pockets planned without them; newer ones
-        // say what they used.
-        assert!(
-            configs.iter().all(|c| c.region_radius_m == 0.0
-                && c.hold_margin_m == 0.0
-                && c.max_pocket_m2 == 0.0)
-        );
+        // Logs from before regions, goal holding, pockets and turns planned without them; newer
+        // ones say what they used.
+        assert!(configs.iter().all(|c| c.region_radius_m == 0.0
+            && c.hold_margin_m == 0.0
+            && c.max_pocket_m2 == 0.0
+            && c.turn_m_per_rad == 0.0));
         let with_regions = planner_configs(&Setup {
             version: 1,
             world: None,
@@ -475,12 +477,14 @@ mod tests {
             region_radius_m: Some(2.5),
             hold_margin_m: Some(0.5),
             max_pocket_m2: Some(0.4),
+            turn_m_per_rad: Some(0.9),
             drones: vec![],
         });
         assert_eq!(with_regions.len(), 1);
         assert_eq!(with_regions[0].region_radius_m, 2.5);
         assert_eq!(with_regions[0].hold_margin_m, 0.5);
         assert_eq!(with_regions[0].max_pocket_m2, 0.4);
+        assert_eq!(with_regions[0].turn_m_per_rad, 0.9);
         assert_eq!(with_regions[0].strategy, Strategy::Greedy);
         let robots = [Some([0.5, 1.0])];
         let live = nav::mission::plan_first_open(&grid, &robots, &configs)
@@ -493,6 +497,7 @@ mod tests {
                 drone: 0,
                 position: robots[0],
                 held: None,
+                heading: None,
                 goal,
                 path: vec![],
             }],

@@ -2,7 +2,7 @@
 //!
 //! * one full mission-planner step (inflation + frontiers + cost matrix + assignment + paths) on
 //!   `willow-full` and `building_31`, for 2, 4 and 8 robots, on the part of the building the robots
-//!   have explored within 10 m of their starts;
+//!   have explored within 10 m of their starts, on paths alone and with the robots' turns weighed;
 //! * the Hungarian algorithm side by side with SciPy's `linear_sum_assignment` on the same random
 //!   matrices, 10×10 to 1000×1000 (SciPy from `target/pyenv`: `bash scripts/bench` installs it).
 
@@ -54,24 +54,35 @@ fn mission_steps(runs: usize) {
             let seeds = starts(&world, n);
             let known = explored_part(&world, &seeds, 10.0);
             let robots: Vec<Option<[f64; 2]>> = seeds.iter().copied().map(Some).collect();
-            let config = PlannerConfig::default();
-            let mut times = vec![];
+            // As the runtime plans: every robot's heading known, so each path's turn is weighed.
+            let facing = PlannerConfig {
+                headings: vec![Some(0.0); n],
+                ..PlannerConfig::default()
+            };
+            let mut times = [vec![], vec![]];
             let mut summary = String::new();
             for _ in 0..runs {
-                let t = Instant::now();
-                let p = plan(&known, &robots, &config);
-                times.push(t.elapsed().as_secs_f64());
-                if let Ok(p) = p {
-                    let assigned = p.robots.iter().filter(|r| r.frontier.is_some()).count();
-                    summary = format!(
-                        "{} frontiers, {assigned}/{n} robots assigned",
-                        p.frontiers.len()
-                    );
+                for (k, config) in [PlannerConfig::default(), facing.clone()]
+                    .iter()
+                    .enumerate()
+                {
+                    let t = Instant::now();
+                    let p = plan(&known, &robots, config);
+                    times[k].push(t.elapsed().as_secs_f64());
+                    if let Ok(p) = p {
+                        let assigned = p.robots.iter().filter(|r| r.frontier.is_some()).count();
+                        summary = format!(
+                            "{} frontiers, {assigned}/{n} robots assigned",
+                            p.frontiers.len()
+                        );
+                    }
                 }
             }
+            let [paths, turns] = times.map(median);
             println!(
-                "  {file:<18} {n} robots: {:8.2} ms   ({summary})",
-                median(times) * 1e3
+                "  {file:<18} {n} robots: {:8.2} ms, {:8.2} ms with turns weighed   ({summary})",
+                paths * 1e3,
+                turns * 1e3
             );
         }
     }

@@ -6,7 +6,8 @@ use crate::clearance::centred_path;
 use crate::frontier::{Frontier, FrontierLimits, frontiers, regions};
 use crate::grid::{Cell, CellXY, Grid};
 use crate::inflate::inflate;
-use crate::search::{Graph, UNREACHABLE, dijkstra, metres, nearest_free};
+use crate::local::wrap_angle;
+use crate::search::{Graph, UNREACHABLE, dijkstra, metres, nearest_free, simplify};
 use crate::vantage::{vantage, viewpoint};
 
 /// How robots are matched to frontiers.
@@ -88,6 +89,21 @@ pub struct PlannerConfig {
     /// inside of a pillar or of furniture seen from every side but one, where a robot sent to
     /// look sees a face, not a room. 0: none is.
     pub max_pocket_m2: f64,
+    /// Per robot (in the order of the robots planned for), its heading, radians in the map
+    /// frame, counter-clockwise from +x; `None` (or missing): no turn is weighed for it (a robot
+    /// looking around ends its turn facing who knows where). See [`PlannerConfig::turn_m_per_rad`].
+    pub headings: Vec<Option<f64>>,
+    /// What turning on the spot costs a robot, metres of path per radian: a frontier whose path
+    /// sets off more than [`PlannerConfig::turn_on_spot_rad`] away from the robot's heading costs
+    /// it the whole turn as well as the path. A drone whose camera looks where it flies turns to
+    /// face such a path before it moves (36°/s, while it would fly 0.45 m/s: 0.7 m/rad); a
+    /// frontier behind it is 2 m dearer than its path says. 0: paths alone are weighed. 0.7 by
+    /// default (it weighs nothing until [`PlannerConfig::headings`] are given).
+    pub turn_m_per_rad: f64,
+    /// A path that sets off within this of the robot's heading is flown while turning (the path
+    /// follower's bend, [`crate::local::FollowerConfig::turn_threshold_rad`]), radians: no turn
+    /// is weighed for it.
+    pub turn_on_spot_rad: f64,
 }
 
 impl Default for PlannerConfig {
@@ -108,6 +124,9 @@ impl Default for PlannerConfig {
             held: vec![],
             hold_margin_m: 0.25,
             max_pocket_m2: 0.5,
+            headings: vec![],
+            turn_m_per_rad: 0.7,
+            turn_on_spot_rad: std::f64::consts::FRAC_PI_2,
         }
     }
 }
@@ -377,7 +396,11 @@ pub fn plan(
     });
     let ignored = ignored.iter().map(|f| inflated.center_of(f.goal)).collect();
     let goals: Vec<CellXY> = frontiers.iter().map(|f| f.goal).collect();
-    let reached = search_all(&graph, &origins, &goals);
+    // The bearings paths set off on, for the robots whose turn is weighed.
+    let bearings_for: Vec<bool> = (0..robots.len())
+        .map(|r| config.turn_m_per_rad > 0.0 && config.headings.get(r).copied().flatten().is_some())
+        .collect();
+    let reached = search_all(&graph, &inflated, &origins, &goals, &bearings_for);
     // Robots × frontiers, metres; `None` where unreachable (a whole row for a robot without a
     // start).
     let raw: Vec<Vec<Option<f64>>> = reached
@@ -386,7 +409,7 @@ pub fn plan(
             (0..goals.len())
                 .map(|f| {
                     row.as_ref()
-                        .map(|r| r[f])
+                        .map(|r| r.costs[f])
                         .filter(|&c| c != UNREACHABLE)
                         .map(|c| metres(&inflated, c))
                 })
@@ -415,11 +438,12 @@ pub fn plan(
         let region = regions(map, &frontiers, config.region_radius_m);
         let centres: Vec<[f64; 2]> = goals.iter().map(|&g| inflated.center_of(g)).collect();
         let held = held_frontiers(&raw, &centres, &config.held);
+        let turns = turns(&reached, &config.headings, config);
         match config.strategy {
             // The thesis pads the matrix to square with zero-cost dummies; the rectangular solver
             // reaches the same optimum without the O(n³) cost of the padding.
             Strategy::Hungarian => spread(
-                &holding(costs.clone(), &held, config.hold_margin_m),
+                &holding(turning(costs.clone(), &turns), &held, config.hold_margin_m),
                 &region,
                 hungarian,
             ),
@@ -430,7 +454,7 @@ pub fn plan(
                     .map(|r| r.iter().map(|c| c.unwrap_or(f64::INFINITY)).collect())
                     .collect();
                 spread(
-                    &holding(usable, &held, config.hold_margin_m),
+                    &holding(turning(usable, &turns), &held, config.hold_margin_m),
                     &region,
                     greedy,
                 )
@@ -516,6 +540,50 @@ fn held_frontiers(
         .collect()
 }
 
+/// Robots × frontiers, what turning on the spot to face each path costs, metres
+/// ([`PlannerConfig::turn_m_per_rad`]): 0 for a path that sets off within
+/// [`PlannerConfig::turn_on_spot_rad`] of the robot's heading, for a robot whose heading is not
+/// known, or where there is no path.
+fn turns(
+    reached: &[Option<Reached>],
+    headings: &[Option<f64>],
+    config: &PlannerConfig,
+) -> Vec<Vec<f64>> {
+    reached
+        .iter()
+        .enumerate()
+        .map(|(r, row)| {
+            let heading = headings.get(r).copied().flatten();
+            row.as_ref().map_or_else(Vec::new, |row| {
+                row.bearings
+                    .iter()
+                    .map(|b| match (heading, b) {
+                        (Some(h), Some(b)) => {
+                            let turn = wrap_angle(b - h).abs();
+                            if turn > config.turn_on_spot_rad {
+                                turn * config.turn_m_per_rad
+                            } else {
+                                0.0
+                            }
+                        }
+                        _ => 0.0,
+                    })
+                    .collect()
+            })
+        })
+        .collect()
+}
+
+/// `cost` (robots × frontiers) with each robot's turns (`turns`, as [`turns`] gives them) added.
+fn turning(mut cost: Vec<Vec<f64>>, turns: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    for (row, turns) in cost.iter_mut().zip(turns) {
+        for (c, t) in row.iter_mut().zip(turns) {
+            *c += t;
+        }
+    }
+    cost
+}
+
 /// `cost` (robots × frontiers) with each robot's held frontier `margin` cheaper (not below 0):
 /// what the assignment weighs.
 fn holding(mut cost: Vec<Vec<f64>>, held: &[Option<usize>], margin: f64) -> Vec<Vec<f64>> {
@@ -550,28 +618,59 @@ pub fn route(
     )
 }
 
-/// One Dijkstra per robot, spread over the available cores: each robot's cost to every goal
-/// ([`UNREACHABLE`] where there is no path), `None` for a robot without an origin. A field is
-/// dropped as soon as its costs are read, so a core holds one at a time.
+/// What one robot's search found: its cost to every goal ([`UNREACHABLE`] where there is no
+/// path) and, when asked for, the bearing its path to each goal sets off on (map frame,
+/// radians; `None` where there is no path or the robot stands on its goal).
+struct Reached {
+    costs: Vec<u32>,
+    bearings: Vec<Option<f64>>,
+}
+
+/// How far along a path its first straight leg is looked for ([`first_bearing`]), metres: about
+/// what a drone flies before the path's first bend would show in its heading.
+const SETTING_OFF_M: f64 = 2.0;
+
+/// One Dijkstra per robot on `graph` (of the grid `grid`), spread over the available cores:
+/// what each robot reaches of `goals`, `None` for a robot without an origin, with the bearings
+/// its paths set off on where `bearings_for` says. A field is dropped as soon as it is read, so a
+/// core holds one at a time.
 fn search_all(
     graph: &Graph,
+    grid: &Grid,
     origins: &[Option<CellXY>],
     goals: &[CellXY],
-) -> Vec<Option<Vec<u32>>> {
+    bearings_for: &[bool],
+) -> Vec<Option<Reached>> {
     let threads = std::thread::available_parallelism()
         .map_or(1, |n| n.get())
         .min(origins.len().max(1));
     let chunk = origins.len().div_ceil(threads).max(1);
+    let robots: Vec<(Option<CellXY>, bool)> = origins
+        .iter()
+        .enumerate()
+        .map(|(r, &o)| (o, bearings_for.get(r).copied().unwrap_or(false)))
+        .collect();
     std::thread::scope(|scope| {
-        let handles: Vec<_> = origins
+        let handles: Vec<_> = robots
             .chunks(chunk)
             .map(|part| {
                 scope.spawn(move || {
                     part.iter()
-                        .map(|o| {
+                        .map(|&(o, bearings)| {
                             o.map(|c| {
                                 let field = graph.dijkstra(c);
-                                goals.iter().map(|&g| field.cost(g)).collect()
+                                Reached {
+                                    costs: goals.iter().map(|&g| field.cost(g)).collect(),
+                                    bearings: goals
+                                        .iter()
+                                        .map(|&g| {
+                                            bearings
+                                                .then(|| field.path_to(g))
+                                                .flatten()
+                                                .and_then(|p| first_bearing(grid, &p))
+                                        })
+                                        .collect(),
+                                }
                             })
                         })
                         .collect::<Vec<_>>()
@@ -583,6 +682,17 @@ fn search_all(
             .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
             .collect()
     })
+}
+
+/// The bearing a path of cells on `grid` sets off on (map frame, radians): from its first cell
+/// to the farthest of its next [`SETTING_OFF_M`] in a straight line of sight, as the path's first
+/// straight leg runs; `None` for a path of one cell.
+fn first_bearing(grid: &Grid, path: &[CellXY]) -> Option<f64> {
+    let cells = ((SETTING_OFF_M / grid.resolution()).ceil() as usize + 1).min(path.len());
+    let legs = simplify(grid, &path[..cells]);
+    let (&from, &to) = (legs.first()?, legs.get(1)?);
+    let (a, b) = (grid.center_of(from), grid.center_of(to));
+    Some((b[1] - a[1]).atan2(b[0] - a[0]))
 }
 
 fn hover(reason: &'static str) -> RobotPlan {
@@ -636,6 +746,7 @@ pub fn explored_part(world: &Grid, seeds: &[[f64; 2]], radius_m: f64) -> Grid {
 mod tests {
     use super::*;
     use crate::grid::tests::{data, grid, grid_with};
+    use std::f64::consts::{FRAC_PI_2, PI};
 
     fn toy() -> Grid {
         // Two rooms, each with an opening into unknown space.
@@ -650,6 +761,21 @@ mod tests {
                 "?..........#...............#",
                 "?..........#...............#",
                 "############################",
+            ],
+            0.25,
+        )
+    }
+
+    /// A corridor 7.5 × 1 m open at both ends.
+    fn corridor() -> Grid {
+        grid_with(
+            &[
+                "##############################",
+                "?............................?",
+                "?............................?",
+                "?............................?",
+                "?............................?",
+                "##############################",
             ],
             0.25,
         )
@@ -1029,19 +1155,73 @@ mod tests {
     }
 
     #[test]
-    fn a_robot_keeps_its_frontier_unless_another_is_cheaper_by_more_than_the_margin() {
-        // A corridor open at both ends: two robots side by side in its middle nearly tie.
-        let corridor = grid_with(
+    fn a_frontier_behind_a_robot_costs_it_the_turn_to_face_its_path() {
+        // The robot 3.05 m of path from the west end, 3.95 m from the east one.
+        let corridor = corridor();
+        let robot = [Some([3.3, 0.75])];
+        let east = |heading: Option<f64>, turn_m_per_rad: f64| -> bool {
+            let p = plan(
+                &corridor,
+                &robot,
+                &PlannerConfig {
+                    headings: vec![heading],
+                    turn_m_per_rad,
+                    ..toy_config()
+                },
+            )
+            .unwrap();
+            p.robots[0].goal.expect("a goal")[0] > 3.75
+        };
+        // Paths alone: the nearer, west end, whichever way it faces.
+        assert!(!east(Some(0.0), 0.0));
+        // Facing east, the west end costs a half turn as well (0.7 m/rad: 2.2 m): east is nearer.
+        assert!(east(Some(0.0), 0.7));
+        // Facing 60° off east, the east end's path is flown while turning: still east.
+        assert!(east(Some(60f64.to_radians()), 0.7));
+        // Facing west, or a heading not known: west.
+        assert!(!east(Some(PI), 0.7));
+        assert!(!east(None, 0.7));
+        // What the plan reports as costs stays metres of path.
+        let p = plan(
+            &corridor,
+            &robot,
+            &PlannerConfig {
+                headings: vec![Some(0.0)],
+                turn_m_per_rad: 0.7,
+                ..toy_config()
+            },
+        )
+        .unwrap();
+        let cheapest = p.costs[0].iter().copied().fold(f64::INFINITY, f64::min);
+        assert!((2.8..3.3).contains(&cheapest), "{:?}", p.costs);
+    }
+
+    #[test]
+    fn a_path_sets_off_along_its_first_straight_leg() {
+        // An L: from (1, 1) north up a corridor, then east. The first leg runs north; a path of
+        // one cell sets off nowhere.
+        let l = grid_with(
             &[
-                "##############################",
-                "?............................?",
-                "?............................?",
-                "?............................?",
-                "?............................?",
-                "##############################",
+                "##########",
+                "#........#",
+                "#.########",
+                "#.########",
+                "#.########",
+                "##########",
             ],
             0.25,
         );
+        let field = dijkstra(&l, (1, 1));
+        let path = field.path_to((8, 4)).expect("a path");
+        let b = first_bearing(&l, &path).expect("a bearing");
+        assert!((b - FRAC_PI_2).abs() < 1e-9, "{b}");
+        assert_eq!(first_bearing(&l, &path[..1]), None);
+    }
+
+    #[test]
+    fn a_robot_keeps_its_frontier_unless_another_is_cheaper_by_more_than_the_margin() {
+        // Two robots side by side in the corridor's middle nearly tie.
+        let corridor = corridor();
         let left = |p: &Plan| -> Vec<bool> {
             p.robots
                 .iter()

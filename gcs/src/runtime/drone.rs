@@ -932,6 +932,18 @@ impl Drone {
             .map(|e| [e.position[0], e.position[1]])
     }
 
+    /// The heading the mission planner weighs this drone's turns from (radians, map frame):
+    /// its estimate's yaw where [`Drone::plan_position`] has a position, unless it is looking
+    /// around (it ends that turn facing wherever the unknown ran out, and takes no plan before).
+    pub fn plan_heading(&self, config: &DroneConfig) -> Option<f64> {
+        if self.scan.is_some() {
+            return None;
+        }
+        self.ekf
+            .estimate_within(config.plan_position_sigma_m)
+            .map(|e| e.attitude[2])
+    }
+
     /// What the SLAM made of one of this drone's camera frames, reaching the mission at `now`:
     /// a pose to fly on, a loss (with visual odometry, if the camera still measured the
     /// motion), or a weak registration ([`SlamFix::weak`]), which is neither: the filter
@@ -2704,6 +2716,20 @@ mod tests {
         // Its share was of the first look around: taking off again later, it looks its own way.
         beside.scan = None;
         assert!(turned_after_takeoff(&mut beside, 10.0) > 0.5);
+    }
+
+    #[test]
+    fn the_planner_weighs_turns_from_the_way_a_drone_faces_unless_it_is_looking_around() {
+        let config = DroneConfig::default();
+        let mut drone = exploring_drone(Arc::default(), &config);
+        drone.slam_fix(0.1, [1.0, 2.0, 0.9], 0.0, None, false);
+        let yaw = drone.pose().expect("a pose")[3];
+        assert_eq!(drone.plan_heading(&config), Some(yaw), "the pose's yaw");
+        // Looking around, it ends facing where the unknown ran out: no heading to weigh.
+        drone.scan = Some(Scan::new(0.1, 0.8, None, &config));
+        assert_eq!(drone.plan_heading(&config), None);
+        drone.scan = None;
+        assert_eq!(drone.plan_heading(&config), Some(yaw));
     }
 
     #[test]

@@ -54,6 +54,9 @@ pub struct RuntimeConfig {
     /// A frontier onto an enclosed pocket of unknown no bigger than this is ignored
     /// ([`PlannerConfig::max_pocket_m2`]), m²; 0: none is.
     pub max_pocket_m2: f64,
+    /// What turning on the spot to face a path costs a drone in the assignment
+    /// ([`PlannerConfig::turn_m_per_rad`]), metres of path per radian; 0: paths alone.
+    pub turn_m_per_rad: f64,
     /// Control period, seconds (mission clock).
     pub control_period: f64,
     /// Mission-planner period, seconds.
@@ -81,6 +84,7 @@ impl Default for RuntimeConfig {
             region_radius_m: PlannerConfig::default().region_radius_m,
             hold_margin_m: PlannerConfig::default().hold_margin_m,
             max_pocket_m2: PlannerConfig::default().max_pocket_m2,
+            turn_m_per_rad: PlannerConfig::default().turn_m_per_rad,
             control_period: 0.1,
             plan_period: 1.0,
             drone: DroneConfig::default(),
@@ -846,6 +850,11 @@ impl Mission {
             .collect();
         // The goals they fly to now, which each keeps unless another is cheaper by the margin.
         let held: Vec<Option<[f64; 2]>> = exploring.iter().map(|&k| self.drones[k].goal).collect();
+        // The ways they face, which a path setting off behind costs a turn.
+        let headings: Vec<Option<f64>> = exploring
+            .iter()
+            .map(|&k| self.drones[k].plan_heading(&self.config.drone))
+            .collect();
         let configs: Vec<PlannerConfig> = self
             .config
             .planner_radii
@@ -858,6 +867,8 @@ impl Mission {
                 held: held.clone(),
                 hold_margin_m: self.config.hold_margin_m,
                 max_pocket_m2: self.config.max_pocket_m2,
+                headings: headings.clone(),
+                turn_m_per_rad: self.config.turn_m_per_rad,
                 ..PlannerConfig::default()
             })
             .collect();
@@ -920,9 +931,9 @@ impl Mission {
             ..
         } = answer.ask;
         // What it planned with, recorded as such (a goal may have been given up since).
-        let (held, given_up) = configs
+        let (held, headings, given_up) = configs
             .first()
-            .map(|c| (c.held.clone(), c.blacklist.clone()))
+            .map(|c| (c.held.clone(), c.headings.clone(), c.blacklist.clone()))
             .unwrap_or_default();
         self.frontiers = plan
             .frontiers
@@ -951,6 +962,7 @@ impl Mission {
                         drone: k,
                         position: answer.robots[i],
                         held: held.get(i).copied().flatten(),
+                        heading: headings.get(i).copied().flatten(),
                         goal: plan.robots[i].goal,
                         path: plan.robots[i].path.clone(),
                     })
