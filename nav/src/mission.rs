@@ -100,9 +100,9 @@ pub struct PlannerConfig {
     /// frontier behind it is 2 m dearer than its path says. 0: paths alone are weighed. 0.7 by
     /// default (it weighs nothing until [`PlannerConfig::headings`] are given).
     pub turn_m_per_rad: f64,
-    /// A path that sets off within this of the robot's heading is flown while turning (the path
-    /// follower's bend, [`crate::local::FollowerConfig::turn_threshold_rad`]), radians: no turn
-    /// is weighed for it.
+    /// A path that sets off within this of the robot's heading is flown while turning, radians:
+    /// no turn is weighed for it. The mission gives its path follower's
+    /// [`crate::local::FollowerConfig::turn_threshold_rad`]; 90° by default, as the runtime's.
     pub turn_on_spot_rad: f64,
 }
 

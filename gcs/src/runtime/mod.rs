@@ -869,6 +869,8 @@ impl Mission {
                 max_pocket_m2: self.config.max_pocket_m2,
                 headings: headings.clone(),
                 turn_m_per_rad: self.config.turn_m_per_rad,
+                // The bend its path follower turns on the spot for; a smaller one it flies.
+                turn_on_spot_rad: self.config.drone.follower.turn_threshold_rad,
                 ..PlannerConfig::default()
             })
             .collect();
