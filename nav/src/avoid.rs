@@ -157,6 +157,22 @@ pub fn brake_toward_walls(
     push
 }
 
+/// A stick push (map-frame x and y, as [`brake_toward_walls`] gives) that brakes a drone
+/// moving at `velocity` faster than `limit` m/s: against its motion, `brake_gain` stick per m/s
+/// of the excess, at most `brake_max` (the same brake as for a wall). None at or below the limit.
+///
+/// A path follower's carrot leads the drone by a fixed distance, so a drone keeps its speed
+/// into a path's bend; slowed by the bend's speed limit ([`crate::local::Follow::Track`]), it
+/// takes a door off a corridor without overshooting into the jamb beyond it.
+pub fn brake_to_speed(velocity: [f64; 2], limit: f64, keep: &KeepClear) -> [f64; 2] {
+    let speed = velocity[0].hypot(velocity[1]);
+    if !(speed.is_finite() && speed > limit && keep.brake_gain > 0.0) {
+        return [0.0; 2];
+    }
+    let stick = (keep.brake_gain * (speed - limit)).min(keep.brake_max);
+    [-velocity[0] / speed * stick, -velocity[1] / speed * stick]
+}
+
 /// The nearest wall point on each side of the drone: the intrusions deepest first, each kept
 /// only if its direction is more than 45° from every one kept before. A straight wall's cells
 /// beside the nearest one lie at angles to it; taken as walls of their own, they would forbid
@@ -257,6 +273,32 @@ mod tests {
             }
         }
         g
+    }
+
+    #[test]
+    fn a_drone_faster_than_its_limit_is_braked_against_its_motion() {
+        let keep = KeepClear::default();
+        // 1 m/s, 0.2 m/s over 0.8: 0.6 × 0.2 = 0.12 stick, straight back.
+        let push = brake_to_speed([0.6, 0.8], 0.8, &keep);
+        assert!(
+            (push[0] + 0.6 * 0.12).abs() < 1e-12 && (push[1] + 0.8 * 0.12).abs() < 1e-12,
+            "{push:?}"
+        );
+        // Far over the limit: no more than the brake's most.
+        let push = brake_to_speed([0.0, -2.0], 0.3, &keep);
+        assert!(
+            (push[1] - keep.brake_max).abs() < 1e-12 && push[0] == 0.0,
+            "{push:?}"
+        );
+        // At or below the limit, with none, or with no velocity to trust: nothing.
+        for (velocity, limit) in [
+            ([0.3, 0.4], 0.5),
+            ([0.3, 0.4], 0.8),
+            ([3.0, 0.0], f64::INFINITY),
+            ([f64::NAN, 0.0], 0.1),
+        ] {
+            assert_eq!(brake_to_speed(velocity, limit, &keep), [0.0; 2]);
+        }
     }
 
     #[test]

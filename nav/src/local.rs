@@ -138,6 +138,12 @@ pub struct FollowerConfig {
     pub resume_threshold_rad: f64,
     /// The path's end is reached within this distance, metres.
     pub reach_m: f64,
+    /// A bend of the path sharper than this is slowed for, radians…
+    pub bend_rad: f64,
+    /// …to this speed at the bend, m/s…
+    pub bend_speed_mps: f64,
+    /// …and this many m/s more per metre before it (how fast the drone may brake, 1/s).
+    pub bend_slow_per_s: f64,
 }
 
 impl Default for FollowerConfig {
@@ -148,6 +154,10 @@ impl Default for FollowerConfig {
             turn_threshold_rad: 30f64.to_radians(),
             resume_threshold_rad: 10f64.to_radians(),
             reach_m: 0.3,
+            // Into a door off a corridor at 0.3 m/s; 0.8 m/s half a metre before it.
+            bend_rad: 45f64.to_radians(),
+            bend_speed_mps: 0.3,
+            bend_slow_per_s: 1.0,
         }
     }
 }
@@ -164,12 +174,16 @@ pub enum Follow {
         /// Heading to turn to, radians.
         yaw: f64,
     },
-    /// Fly to the carrot, facing `yaw` (the camera looks where the drone goes).
+    /// Fly to the carrot, facing `yaw` (the camera looks where the drone goes), at most at
+    /// `speed_mps`.
     Track {
         /// Position setpoint, map frame.
         carrot: [f64; 2],
         /// Heading, radians.
         yaw: f64,
+        /// The speed the drone may fly here to take the next sharp bend without overshooting
+        /// it, m/s (infinite: no sharp bend ahead).
+        speed_mps: f64,
     },
     /// The end of the path has been reached.
     Arrived,
@@ -222,7 +236,7 @@ impl PathFollower {
             return Follow::Arrived;
         }
         if self.path.len() == 1 {
-            return self.aim(pose, first, first);
+            return self.aim(pose, first, first, f64::INFINITY);
         }
         // Progress: the nearest point on the segments from the current one on (never backwards).
         let (mut best, mut best_d, mut best_t) = (self.segment, f64::INFINITY, 0.0);
@@ -255,10 +269,34 @@ impl PathFollower {
             left = (left - len).min(self.config.corner_m);
             from = to;
         }
-        self.aim(pose, nearest, carrot)
+        let speed = self.next_bend(best, nearest).map_or(f64::INFINITY, |d| {
+            self.config.bend_speed_mps + self.config.bend_slow_per_s * d
+        });
+        self.aim(pose, nearest, carrot, speed)
     }
 
-    fn aim(&mut self, pose: Pose2, nearest: [f64; 2], carrot: [f64; 2]) -> Follow {
+    /// How far along the path from `nearest` (on segment `segment`) its next bend sharper than
+    /// [`FollowerConfig::bend_rad`] lies, metres; `None` when it bends no more than that.
+    fn next_bend(&self, segment: usize, nearest: [f64; 2]) -> Option<f64> {
+        let mut along = 0.0;
+        let mut from = nearest;
+        for k in segment + 1..self.path.len().saturating_sub(1) {
+            let (a, b, c) = (self.path[k - 1], self.path[k], self.path[k + 1]);
+            along += dist(from, b);
+            from = b;
+            if b == a || b == c {
+                continue;
+            }
+            let bend =
+                wrap_angle((c[1] - b[1]).atan2(c[0] - b[0]) - (b[1] - a[1]).atan2(b[0] - a[0]));
+            if bend.abs() > self.config.bend_rad {
+                return Some(along);
+            }
+        }
+        None
+    }
+
+    fn aim(&mut self, pose: Pose2, nearest: [f64; 2], carrot: [f64; 2], speed_mps: f64) -> Follow {
         let (dx, dy) = (carrot[0] - pose.x, carrot[1] - pose.y);
         let yaw = dy.atan2(dx);
         let error = wrap_angle(yaw - pose.yaw).abs();
@@ -270,7 +308,11 @@ impl PathFollower {
         if self.turning {
             Follow::Turn { at: nearest, yaw }
         } else {
-            Follow::Track { carrot, yaw }
+            Follow::Track {
+                carrot,
+                yaw,
+                speed_mps,
+            }
         }
     }
 }
@@ -436,6 +478,47 @@ mod tests {
             c => panic!("{c:?}"),
         }
         assert_eq!(f.step(pose(4.0, 3.8, FRAC_PI_2)), Follow::Arrived);
+    }
+
+    /// The speed limit the follower sets at `at` facing +x on `path`.
+    fn speed_at(path: Vec<[f64; 2]>, at: [f64; 2]) -> f64 {
+        let mut f = PathFollower::new(FollowerConfig::default());
+        f.set_path(path);
+        match f.step(pose(at[0], at[1], 0.0)) {
+            Follow::Track { speed_mps, .. } => speed_mps,
+            c => panic!("{c:?}"),
+        }
+    }
+
+    #[test]
+    fn the_follower_slows_for_a_sharp_bend_by_how_near_it_is() {
+        let c = FollowerConfig::default();
+        let corner = vec![[0.0, 0.0], [4.0, 0.0], [4.0, 4.0]];
+        for x in [1.0, 3.5, 3.9] {
+            let expected = c.bend_speed_mps + c.bend_slow_per_s * (4.0 - x);
+            let speed = speed_at(corner.clone(), [x, 0.0]);
+            assert!(
+                (speed - expected).abs() < 1e-9,
+                "at {x}: {speed}, not {expected}"
+            );
+        }
+        // A gentle bend (27°) is flown at speed; the sharp one after it (63°) counts from here.
+        let gentle_then_sharp = vec![[0.0, 0.0], [2.0, 0.0], [4.0, 1.0], [4.0, 4.0]];
+        let expected = c.bend_speed_mps + c.bend_slow_per_s * (1.0 + 5f64.sqrt());
+        let speed = speed_at(gentle_then_sharp, [1.0, 0.0]);
+        assert!((speed - expected).abs() < 1e-9, "{speed}, not {expected}");
+        // No bend, or only gentle ones (a repeated point is none): no limit.
+        assert_eq!(
+            speed_at(vec![[0.0, 0.0], [4.0, 0.0]], [1.0, 0.0]),
+            f64::INFINITY
+        );
+        assert_eq!(
+            speed_at(
+                vec![[0.0, 0.0], [2.0, 0.0], [2.0, 0.0], [4.0, 1.0]],
+                [1.0, 0.0]
+            ),
+            f64::INFINITY
+        );
     }
 
     #[test]

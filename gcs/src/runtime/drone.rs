@@ -9,7 +9,7 @@ use std::time::Duration;
 use link::{Command, CommandError, FlightMode, LinkState, Sticks, Telemetry, VehicleLink};
 use nalgebra::Isometry3;
 use nav::Grid;
-use nav::avoid::{KeepClear, brake_toward_walls, keep_clear};
+use nav::avoid::{KeepClear, brake_to_speed, brake_toward_walls, keep_clear};
 use nav::control::{PidGains, Pose3, PositionController, PositionGains};
 use nav::local::{Follow, FollowerConfig, PathFollower, Pose2, wrap_angle};
 use nav::mission::SAME_FRONTIER_M;
@@ -465,8 +465,10 @@ pub struct Drone {
     clocked_goal: Option<([f64; 2], f64)>,
     scan: Option<Scan>,
     hold: [f64; 2],
-    /// Pursuing a carrot along a path this tick (not holding still).
+    /// Pursuing a carrot along a path this tick (not holding still)…
     tracking: bool,
+    /// …at most this fast, m/s (the path's next sharp bend).
+    speed_limit: f64,
     /// Paths given to the follower so far…
     paths: u64,
     /// …and what the position controller flew to last tick.
@@ -584,6 +586,7 @@ impl Drone {
             scan: None,
             hold: [x, y],
             tracking: false,
+            speed_limit: f64::INFINITY,
             paths: 0,
             flown: None,
             turning: false,
@@ -1382,8 +1385,17 @@ impl Drone {
         // An approach to a wall faster than can stop short of it is braked: `keep_clear`'s
         // steer point moves with the drone, so the derivative terms see no drift toward a
         // jamb while pursuing a carrot.
-        if let (Some(map), Some(velocity)) = (&self.map, self.ekf.valid_velocity()) {
-            let [bx, by] = brake_toward_walls(map, here, velocity, &config.keep_clear);
+        // Pursuing a carrot, it also flies into a sharp bend no faster than it can take it.
+        if let Some(velocity) = self.ekf.valid_velocity() {
+            let [wx, wy] = self.map.as_ref().map_or([0.0; 2], |map| {
+                brake_toward_walls(map, here, velocity, &config.keep_clear)
+            });
+            let [sx, sy] = if self.tracking {
+                brake_to_speed(velocity, self.speed_limit, &config.keep_clear)
+            } else {
+                [0.0; 2]
+            };
+            let (bx, by) = (wx + sx, wy + sy);
             let (s, co) = estimate.yaw.sin_cos();
             let (forward, left) = (co * bx + s * by, -s * bx + co * by);
             c.pitch = (c.pitch + forward).clamp(-1.0, 1.0);
@@ -1531,8 +1543,13 @@ impl Drone {
                 self.turning = true;
                 self.yaw_goal = yaw;
             }
-            Follow::Track { carrot, yaw } => {
+            Follow::Track {
+                carrot,
+                yaw,
+                speed_mps,
+            } => {
                 self.tracking = true;
+                self.speed_limit = speed_mps;
                 self.turning = false;
                 self.hold = carrot;
                 self.yaw_goal = yaw;
@@ -2044,6 +2061,36 @@ mod tests {
         // more.
         let (braked, not) = (last_roll(&config), last_roll(&unbraked));
         assert!(braked > not + 0.05, "braked {braked}, not {not}");
+    }
+
+    #[test]
+    fn a_drone_flying_fast_into_a_sharp_bend_of_its_path_is_braked() {
+        // East along y = 0, then a right angle north at x = 0.7 m (a door off a corridor).
+        let path = vec![[0.0, 0.0], [0.7, 0.0], [0.7, 3.0]];
+        // Flying east at 1 m/s: the pitch stick at the last of six ticks, 0.3 m before the bend.
+        let last_pitch = |config: &DroneConfig| {
+            let mut drone = exploring_drone(Arc::default(), config);
+            drone.set_plan(Some([0.7, 3.0]), path.clone(), None, 0.0);
+            for i in 1..=6 {
+                let t = 0.1 * f64::from(i);
+                drone.slam_fix(t, [t - 0.2, 0.0, 0.9], 0.0, None, false);
+                drone.tick(t, config);
+            }
+            assert!(drone.tracking, "pursuing its carrot");
+            f64::from(drone.sticks.expect("sticks").pitch)
+        };
+        let config = DroneConfig::default();
+        let no_bend_limit = DroneConfig {
+            follower: FollowerConfig {
+                bend_rad: std::f64::consts::PI,
+                ..config.follower.clone()
+            },
+            ..config.clone()
+        };
+        // Allowed 0.3 + 1.0 × 0.3 = 0.6 m/s there: 0.4 m/s too fast, braked with the wall
+        // brake's gain (0.6 stick per m/s) up to its 0.3 stick.
+        let (braked, not) = (last_pitch(&config), last_pitch(&no_bend_limit));
+        assert!(braked < not - 0.15, "braked {braked}, not {not}");
     }
 
     #[test]
