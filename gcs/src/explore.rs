@@ -13,6 +13,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
 use nav::grid::Grid;
+use nav::local::FollowerConfig;
 use nav::mission::{PlannerConfig, Strategy};
 use sitl::World;
 use slam::eval::{Alignment, ate, loop_closure_errors};
@@ -83,6 +84,15 @@ pub struct SimArgs {
     /// faces costs it the turn as well; 0: paths alone are weighed.
     #[arg(long, value_name = "M_PER_RAD", default_value_t = PlannerConfig::default().turn_m_per_rad)]
     pub turn_cost: f64,
+    /// A drone left without a frontier of its own (more drones than frontiers) flies toward
+    /// the nearest frontier another drone has and waits this far short of it, metres of path
+    /// (1 m more for each drone ahead of it there), to be near what that drone's look around
+    /// opens; 0: it hovers where it is.
+    #[arg(long, value_name = "METRES", default_value_t = PlannerConfig::default().stage_back_m)]
+    pub stage_back: f64,
+    /// A drone flies nowhere faster than this, m/s (slower into a sharp bend of its path).
+    #[arg(long, value_name = "M_PER_S", default_value_t = DroneConfig::default().follower.max_speed_mps)]
+    pub max_speed: f64,
     /// How a drone looks around at a goal: turning the short way to what the map shows
     /// unknown, no further (`sweep`), or a whole turn every time (`whole`, as the thesis).
     #[arg(long, value_enum, default_value_t = LookAround::Sweep)]
@@ -307,6 +317,18 @@ fn validate(args: &ExploreArgs) -> anyhow::Result<Vec<Fault>> {
             args.sim.hold_margin
         );
     }
+    if !(args.sim.max_speed.is_finite() && (0.1..=10.0).contains(&args.sim.max_speed)) {
+        bail!(
+            "--max-speed {} must be between 0.1 and 10 m/s",
+            args.sim.max_speed
+        );
+    }
+    if !(args.sim.stage_back.is_finite() && (0.0..=50.0).contains(&args.sim.stage_back)) {
+        bail!(
+            "--stage-back {} must be between 0 (off) and 50 metres",
+            args.sim.stage_back
+        );
+    }
     if !(args.sim.turn_cost.is_finite() && (0.0..=10.0).contains(&args.sim.turn_cost)) {
         bail!(
             "--turn-cost {} must be between 0 (off) and 10 metres per radian",
@@ -459,6 +481,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
             hold_margin_m: Some(args.sim.hold_margin),
             max_pocket_m2: Some(args.sim.max_pocket),
             turn_m_per_rad: Some(args.sim.turn_cost),
+            stage_back_m: Some(args.sim.stage_back),
             drones: fleet
                 .drones
                 .iter()
@@ -488,6 +511,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
             hold_margin_m: args.sim.hold_margin,
             max_pocket_m2: args.sim.max_pocket,
             turn_m_per_rad: args.sim.turn_cost,
+            stage_back_m: args.sim.stage_back,
             timeout: Some(args.timeout),
             drone: DroneConfig {
                 sweep: match args.sim.look_around {
@@ -495,6 +519,10 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
                     LookAround::Whole => None,
                 },
                 battery_swap: args.sim.battery_swap.map(|_| BatterySwap::default()),
+                follower: FollowerConfig {
+                    max_speed_mps: args.sim.max_speed,
+                    ..DroneConfig::default().follower
+                },
                 ..DroneConfig::default()
             },
             // In the window the operator starts the mission (again, after a landing), and the

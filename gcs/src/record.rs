@@ -57,6 +57,10 @@ pub struct Setup {
     /// radian (absent from older logs, whose plans weighed paths alone).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub turn_m_per_rad: Option<f64>,
+    /// How far short of another drone's frontier a drone without one waited, metres (absent
+    /// from older logs, whose drones without a frontier hovered).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stage_back_m: Option<f64>,
     /// The drones.
     pub drones: Vec<SetupDrone>,
 }

@@ -341,6 +341,8 @@ pub(crate) fn planner_configs(setup: &Setup) -> Vec<PlannerConfig> {
             max_pocket_m2: setup.max_pocket_m2.unwrap_or(0.0),
             // …and weighed paths alone.
             turn_m_per_rad: setup.turn_m_per_rad.unwrap_or(0.0),
+            // …and hovered without a frontier.
+            stage_back_m: setup.stage_back_m.unwrap_or(0.0),
             ..PlannerConfig::default()
         })
         .collect()
@@ -460,6 +462,7 @@ mod tests {
             hold_margin_m: None,
             max_pocket_m2: None,
             turn_m_per_rad: None,
+            stage_back_m: None,
             drones: vec![],
         });
         assert_eq!(configs.len(), RuntimeConfig::default().planner_radii.len());
@@ -468,7 +471,8 @@ mod tests {
         assert!(configs.iter().all(|c| c.region_radius_m == 0.0
             && c.hold_margin_m == 0.0
             && c.max_pocket_m2 == 0.0
-            && c.turn_m_per_rad == 0.0));
+            && c.turn_m_per_rad == 0.0
+            && c.stage_back_m == 0.0));
         let with_regions = planner_configs(&Setup {
             version: 1,
             world: None,
@@ -478,6 +482,7 @@ mod tests {
             hold_margin_m: Some(0.5),
             max_pocket_m2: Some(0.4),
             turn_m_per_rad: Some(0.9),
+            stage_back_m: Some(1.5),
             drones: vec![],
         });
         assert_eq!(with_regions.len(), 1);
@@ -485,6 +490,7 @@ mod tests {
         assert_eq!(with_regions[0].hold_margin_m, 0.5);
         assert_eq!(with_regions[0].max_pocket_m2, 0.4);
         assert_eq!(with_regions[0].turn_m_per_rad, 0.9);
+        assert_eq!(with_regions[0].stage_back_m, 1.5);
         assert_eq!(with_regions[0].strategy, Strategy::Greedy);
         let robots = [Some([0.5, 1.0])];
         let live = nav::mission::plan_first_open(&grid, &robots, &configs)

@@ -104,6 +104,12 @@ pub struct PlannerConfig {
     /// no turn is weighed for it. The mission gives its path follower's
     /// [`crate::local::FollowerConfig::turn_threshold_rad`]; 90° by default, as the runtime's.
     pub turn_on_spot_rad: f64,
+    /// A robot left without a frontier (more robots than frontiers) flies toward the nearest
+    /// frontier another robot is headed for and stops this far short of it along its path,
+    /// metres ([`STAGE_SPACING_M`] further for each robot nearer it that stages there too):
+    /// when that robot's look around opens new frontiers, the one waiting behind it is near
+    /// them. 0: it hovers where it is.
+    pub stage_back_m: f64,
 }
 
 impl Default for PlannerConfig {
@@ -127,6 +133,7 @@ impl Default for PlannerConfig {
             headings: vec![],
             turn_m_per_rad: 0.7,
             turn_on_spot_rad: std::f64::consts::FRAC_PI_2,
+            stage_back_m: 2.0,
         }
     }
 }
@@ -134,14 +141,15 @@ impl Default for PlannerConfig {
 /// What one robot should do.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RobotPlan {
-    /// Index of its frontier in [`Plan::frontiers`], `None` to hover.
+    /// Index of its frontier in [`Plan::frontiers`]; `None` to hover, or, with a path, to move
+    /// up behind a frontier another robot has ([`PlannerConfig::stage_back_m`]).
     pub frontier: Option<usize>,
     /// Path length to it, metres.
     pub cost_m: Option<f64>,
     /// Its frontier's goal, map frame, metres (what is given up if the frontier stays).
     pub goal: Option<[f64; 2]>,
-    /// Waypoints from the robot to where it looks around (its vantage, near the goal), map
-    /// frame, metres (straight segments).
+    /// Waypoints from the robot to where it looks around (its vantage, near the goal), or to
+    /// where it waits behind another robot's frontier, map frame, metres (straight segments).
     pub path: Vec<[f64; 2]>,
     /// Why it hovers, when it does.
     pub hover_reason: Option<&'static str>,
@@ -241,6 +249,7 @@ pub fn plan_first_open(
                     break;
                 }
             }
+            stage_idle(map, robots, &strict(config), &mut step);
             chosen = Some(step);
             break;
         }
@@ -314,6 +323,109 @@ fn lend_to_idle(
     Ok(idle(step).contains(&true))
 }
 
+/// How much further back each robot waits than the one before it behind the same frontier,
+/// metres ([`PlannerConfig::stage_back_m`]).
+pub const STAGE_SPACING_M: f64 = 1.0;
+
+/// A robot is not sent to wait somewhere nearer than this, metres: it hovers where it is.
+const STAGE_MIN_MOVE_M: f64 = 0.5;
+
+/// Robots with a pose that `step` leaves without a frontier are sent toward the frontier
+/// another robot is headed for that is cheapest for them, to wait
+/// [`PlannerConfig::stage_back_m`] short of it along their path ([`STAGE_SPACING_M`] more per
+/// robot ahead of them there). In SITL (apartment, four drones on true poses) three drones
+/// hovered for about 10 s a mission where the corridor's one frontier had a drone and the
+/// rooms off it were not yet seen.
+fn stage_idle(map: &Grid, robots: &[Option<[f64; 2]>], config: &PlannerConfig, step: &mut Plan) {
+    if config.stage_back_m <= 0.0 {
+        return;
+    }
+    let busy: Vec<usize> = step.robots.iter().filter_map(|r| r.frontier).collect();
+    // (robot, frontier, path to that frontier's look-around spot, its length)
+    let mut staging: Vec<(usize, usize, Vec<[f64; 2]>, f64)> = vec![];
+    for (r, p) in robots.iter().enumerate() {
+        let Some(p) = p.filter(|_| step.robots[r].frontier.is_none()) else {
+            continue;
+        };
+        let inflated = &step.inflated;
+        let origin = inflated
+            .cell_of(p)
+            .and_then(|c| free_start(inflated, c, config.robot_radius_m));
+        let nearest = busy
+            .iter()
+            .copied()
+            .min_by(|&a, &b| step.costs[r][a].total_cmp(&step.costs[r][b]));
+        let (Some(origin), Some(f)) = (origin, nearest) else {
+            continue;
+        };
+        let look_from = vantage(
+            map,
+            inflated,
+            step.frontiers[f].goal,
+            config.look_around_room_m,
+            config.look_around_shift_m,
+        );
+        if let Some(cells) = centred_path(inflated, origin, look_from, config.comfort_m) {
+            let path: Vec<[f64; 2]> = cells.into_iter().map(|c| inflated.center_of(c)).collect();
+            let length = path_length(&path);
+            staging.push((r, f, path, length));
+        }
+    }
+    staging.sort_by(|a, b| a.3.total_cmp(&b.3));
+    let mut ahead = vec![0usize; step.frontiers.len()];
+    for (r, f, path, length) in staging {
+        let back = config.stage_back_m + STAGE_SPACING_M * ahead[f] as f64;
+        ahead[f] += 1;
+        if length - back < STAGE_MIN_MOVE_M {
+            continue;
+        }
+        step.robots[r] = RobotPlan {
+            frontier: None,
+            cost_m: Some(length - back),
+            goal: None,
+            path: cut_short(&path, back),
+            hover_reason: None,
+        };
+    }
+}
+
+/// The length of a path of straight segments, metres.
+pub fn path_length(path: &[[f64; 2]]) -> f64 {
+    path.windows(2)
+        .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+        .sum()
+}
+
+/// `path` without its last `back_m` metres (just its start if it is no longer than that).
+pub fn cut_short(path: &[[f64; 2]], back_m: f64) -> Vec<[f64; 2]> {
+    let mut keep = path_length(path) - back_m;
+    let mut out = path.first().map(|&p| vec![p]).unwrap_or_default();
+    for w in path.windows(2) {
+        if keep <= 0.0 {
+            break;
+        }
+        let step = (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]);
+        if step <= keep {
+            out.push(w[1]);
+        } else {
+            let t = keep / step;
+            out.push([
+                w[0][0] + t * (w[1][0] - w[0][0]),
+                w[0][1] + t * (w[1][1] - w[0][1]),
+            ]);
+        }
+        keep -= step;
+    }
+    out
+}
+
+/// The cell a robot in `cell` of `inflated` starts its paths from: the nearest free one (it may
+/// be inside the inflated band around a wall), looking as far as two robot radii.
+fn free_start(inflated: &Grid, cell: CellXY, robot_radius_m: f64) -> Option<CellXY> {
+    let reach = (robot_radius_m / inflated.resolution()).ceil() as usize * 2 + 2;
+    nearest_free(inflated, cell, reach)
+}
+
 /// One planner step. `robots[i]` is robot i's position in the map frame, `None` if its pose is
 /// invalid (it is planned to hover).
 pub fn plan(
@@ -341,12 +453,10 @@ pub fn plan(
         })
         .collect::<Result<Vec<Option<CellXY>>, _>>()?;
     let inflated = inflate(map, config.robot_radius_m);
-    // A robot inside the inflated band around a wall starts from the nearest free cell.
-    let reach = (config.robot_radius_m / map.resolution()).ceil() as usize * 2 + 2;
     let graph = Graph::new(&inflated);
     let origins: Vec<Option<CellXY>> = starts
         .iter()
-        .map(|s| s.and_then(|c| nearest_free(&inflated, c, reach)))
+        .map(|s| s.and_then(|c| free_start(&inflated, c, config.robot_radius_m)))
         .collect();
     // Frontiers are found on the map grown by a thin margin only: the strip of a room seen
     // through a door at a slant lies within the robot's radius of the door's jambs, and on the
@@ -1152,6 +1262,72 @@ mod tests {
             p.robots.iter().filter(|r| r.hover_reason.is_some()).count(),
             1
         );
+    }
+
+    #[test]
+    fn robots_left_without_a_frontier_wait_behind_the_one_that_has_it_one_metre_apart() {
+        // A corridor 7.5 × 1 m closed to the east: one frontier, at its west end.
+        let mut rows = vec!["#".repeat(30)];
+        rows.extend(std::iter::repeat_n(format!("?{}#", ".".repeat(28)), 4));
+        rows.push("#".repeat(30));
+        let rows: Vec<&str> = rows.iter().map(String::as_str).collect();
+        let g = grid_with(&rows, 0.25);
+        let robots = [
+            Some([1.5, 0.5]),
+            Some([6.5, 0.5]),
+            Some([5.5, 0.5]),
+            Some([2.6, 0.5]),
+        ];
+        let config = toy_config();
+        let p = plan_first_open(&g, &robots, std::slice::from_ref(&config))
+            .unwrap()
+            .unwrap();
+        assert_eq!(p.frontiers.len(), 1);
+        assert_eq!(p.robots[0].frontier, Some(0));
+        let spot = *p.robots[0].path.last().unwrap();
+        // Robot 3, nearest of the rest, would wait 2 m short of the spot robot 0 looks around
+        // from: it is nearly there already, so it hovers where it is.
+        let near = &p.robots[3];
+        assert!(
+            near.path.is_empty() && near.hover_reason.is_some(),
+            "{near:?}"
+        );
+        // Robot 2 waits 2 m + 1 m short of it (robot 3 counts as ahead), robot 1 a metre further.
+        for (r, back) in [(2, 3.0), (1, 4.0)] {
+            let rp = &p.robots[r];
+            assert_eq!((rp.frontier, rp.goal, rp.hover_reason), (None, None, None));
+            let end = *rp.path.last().unwrap();
+            assert!(
+                (end[0] - (spot[0] + back)).abs() < 0.3 && (end[1] - spot[1]).abs() < 0.3,
+                "robot {r} waits at {end:?}, the spot is {spot:?}"
+            );
+            assert!((rp.cost_m.unwrap() - path_length(&rp.path)).abs() < 1e-9);
+        }
+        // Off: the three hover.
+        let off = PlannerConfig {
+            stage_back_m: 0.0,
+            ..config
+        };
+        let p = plan_first_open(&g, &robots, &[off]).unwrap().unwrap();
+        assert!(
+            p.robots[1..]
+                .iter()
+                .all(|r| r.path.is_empty() && r.hover_reason.is_some())
+        );
+    }
+
+    #[test]
+    fn a_path_cut_short_ends_that_far_back_along_it() {
+        let path = [[0.0, 0.0], [3.0, 0.0], [3.0, 2.0]];
+        assert_eq!(path_length(&path), 5.0);
+        assert_eq!(
+            cut_short(&path, 1.0),
+            vec![[0.0, 0.0], [3.0, 0.0], [3.0, 1.0]]
+        );
+        assert_eq!(cut_short(&path, 3.5), vec![[0.0, 0.0], [1.5, 0.0]]);
+        assert_eq!(cut_short(&path, 0.0), path.to_vec());
+        assert_eq!(cut_short(&path, 9.0), vec![[0.0, 0.0]]);
+        assert!(cut_short(&[], 1.0).is_empty());
     }
 
     #[test]

@@ -1643,6 +1643,12 @@ impl Drone {
         }
         if let Follow::Arrived = self.follow(pose) {
             self.set_path(vec![]);
+            if self.goal.is_none() {
+                // Waiting behind another drone's frontier: held here, ready for the next plan
+                // (a look around would keep it from one for seconds).
+                self.hold = here;
+                return None;
+            }
             let goal = self.goal.take();
             let mut scan = self.look_around(now, pose, goal, config);
             if let Some(turn) = self.look_turn.take() {
@@ -2083,6 +2089,7 @@ mod tests {
         let no_bend_limit = DroneConfig {
             follower: FollowerConfig {
                 bend_rad: std::f64::consts::PI,
+                max_speed_mps: f64::INFINITY,
                 ..config.follower.clone()
             },
             ..config.clone()
@@ -2630,19 +2637,8 @@ mod tests {
     /// (x range, y range, metres) are not mapped, the heading following its goal, its camera's
     /// frames (if any) telling their half field of view; returns the event that ended it,
     /// when, and the heading goal then.
-    fn look_around_in(
-        unknown: Option<([f64; 2], [f64; 2])>,
-        camera_half_fov: Option<f64>,
-        look_turn: Option<f64>,
-    ) -> (DroneEvent, f64, f64) {
-        let config = DroneConfig::default();
-        let mut drone = exploring_drone(Arc::default(), &config);
-        let frame = |drone: &mut Drone, t| {
-            if let Some(h) = camera_half_fov {
-                drone.camera_frame(t, h);
-            }
-        };
-        frame(&mut drone, 0.0);
+    /// A walled room 4 × 4 m round (0, 0), free but for the rectangle `unknown` (x and y ranges).
+    fn walled_room(unknown: Option<([f64; 2], [f64; 2])>) -> Grid {
         let mut map = Grid::new(80, 80, 0.05, [-2.0, -2.0], nav::Cell::Free);
         for i in 0..80 {
             for c in [(i, 0), (i, 79), (0, i), (79, i)] {
@@ -2659,7 +2655,63 @@ mod tests {
                 }
             }
         }
-        drone.set_map(Arc::new(map));
+        map
+    }
+
+    #[test]
+    fn a_drone_waiting_behind_another_holds_where_its_path_ends_and_looks_around_only_at_a_goal() {
+        let config = DroneConfig::default();
+        // Unknown to the south: a look around there would turn toward it.
+        let south = Some(([-0.3, 0.3], [-1.95, -1.0]));
+        let arrive = |goal: Option<[f64; 2]>| {
+            let mut drone = exploring_drone(Arc::default(), &config);
+            drone.set_map(Arc::new(walled_room(south)));
+            drone.set_plan(goal, vec![[0.0, 0.0]], None, 0.0);
+            let yaw0 = drone.yaw_goal;
+            for k in 1..=20 {
+                let t = f64::from(k) * 0.1;
+                drone.slam_fix(t, [0.0, 0.0, 0.9], drone.yaw_goal, None, false);
+                assert_eq!(drone.tick(t, &config), None);
+            }
+            let turned = wrap_angle(drone.yaw_goal - yaw0).abs();
+            (drone, turned)
+        };
+        // Sent to wait (no goal): it holds at its path's end, facing as it was.
+        let (mut waiting, turned) = arrive(None);
+        assert!(
+            waiting.scan.is_none() && turned < 1e-9,
+            "turned {turned} rad"
+        );
+        assert!(
+            waiting.hold[0].hypot(waiting.hold[1]) < 0.05,
+            "{:?}",
+            waiting.hold
+        );
+        // …and the next plan's goal is its own at once.
+        waiting.set_plan(Some([1.0, 0.0]), vec![[0.0, 0.0], [1.0, 0.0]], None, 2.1);
+        assert_eq!(waiting.goal, Some([1.0, 0.0]));
+        // At a goal it looks around, turning toward the unknown.
+        let (at_goal, turned) = arrive(Some([0.0, 0.0]));
+        assert!(
+            at_goal.scan.is_some() && turned > 0.3,
+            "turned {turned} rad"
+        );
+    }
+
+    fn look_around_in(
+        unknown: Option<([f64; 2], [f64; 2])>,
+        camera_half_fov: Option<f64>,
+        look_turn: Option<f64>,
+    ) -> (DroneEvent, f64, f64) {
+        let config = DroneConfig::default();
+        let mut drone = exploring_drone(Arc::default(), &config);
+        let frame = |drone: &mut Drone, t| {
+            if let Some(h) = camera_half_fov {
+                drone.camera_frame(t, h);
+            }
+        };
+        frame(&mut drone, 0.0);
+        drone.set_map(Arc::new(walled_room(unknown)));
         // Arrived at its goal: the look around begins with the first tick.
         drone.set_plan(Some([1.0, 0.0]), vec![[0.0, 0.0]], look_turn, 0.0);
         let mut t = 0.0;

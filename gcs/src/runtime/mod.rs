@@ -57,6 +57,9 @@ pub struct RuntimeConfig {
     /// What turning on the spot to face a path costs a drone in the assignment
     /// ([`PlannerConfig::turn_m_per_rad`]), metres of path per radian; 0: paths alone.
     pub turn_m_per_rad: f64,
+    /// A drone left without a frontier waits this far short of another drone's
+    /// ([`PlannerConfig::stage_back_m`]), metres of path; 0: it hovers where it is.
+    pub stage_back_m: f64,
     /// Control period, seconds (mission clock).
     pub control_period: f64,
     /// Mission-planner period, seconds.
@@ -85,6 +88,7 @@ impl Default for RuntimeConfig {
             hold_margin_m: PlannerConfig::default().hold_margin_m,
             max_pocket_m2: PlannerConfig::default().max_pocket_m2,
             turn_m_per_rad: PlannerConfig::default().turn_m_per_rad,
+            stage_back_m: PlannerConfig::default().stage_back_m,
             control_period: 0.1,
             plan_period: 1.0,
             drone: DroneConfig::default(),
@@ -869,6 +873,7 @@ impl Mission {
                 max_pocket_m2: self.config.max_pocket_m2,
                 headings: headings.clone(),
                 turn_m_per_rad: self.config.turn_m_per_rad,
+                stage_back_m: self.config.stage_back_m,
                 // The bend its path follower turns on the spot for; a smaller one it flies.
                 turn_on_spot_rad: self.config.drone.follower.turn_threshold_rad,
                 ..PlannerConfig::default()
