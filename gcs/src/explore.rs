@@ -90,6 +90,11 @@ pub struct SimArgs {
     /// opens; 0: it hovers where it is.
     #[arg(long, value_name = "METRES", default_value_t = PlannerConfig::default().stage_back_m)]
     pub stage_back: f64,
+    /// Paths planned at a thinner radius than the widest (a door too narrow on the map for the
+    /// wider ones) keep the widest one's distance from the walls where they can: through the
+    /// middle of a door, not along its jamb; `false`: shortest paths.
+    #[arg(long, value_name = "BOOL", default_value_t = RuntimeConfig::default().centre_paths, action = clap::ArgAction::Set)]
+    pub centre_paths: bool,
     /// A drone flies nowhere faster than this, m/s (slower into a sharp bend of its path).
     #[arg(long, value_name = "M_PER_S", default_value_t = DroneConfig::default().follower.max_speed_mps)]
     pub max_speed: f64,
@@ -482,6 +487,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
             max_pocket_m2: Some(args.sim.max_pocket),
             turn_m_per_rad: Some(args.sim.turn_cost),
             stage_back_m: Some(args.sim.stage_back),
+            centre_paths: Some(args.sim.centre_paths),
             drones: fleet
                 .drones
                 .iter()
@@ -512,6 +518,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
             max_pocket_m2: args.sim.max_pocket,
             turn_m_per_rad: args.sim.turn_cost,
             stage_back_m: args.sim.stage_back,
+            centre_paths: args.sim.centre_paths,
             timeout: Some(args.timeout),
             drone: DroneConfig {
                 sweep: match args.sim.look_around {

@@ -178,6 +178,7 @@ pub fn run_with(args: &FlyArgs, window: Option<Window>) -> anyhow::Result<()> {
             max_pocket_m2: Some(RuntimeConfig::default().max_pocket_m2),
             turn_m_per_rad: Some(RuntimeConfig::default().turn_m_per_rad),
             stage_back_m: Some(RuntimeConfig::default().stage_back_m),
+            centre_paths: Some(RuntimeConfig::default().centre_paths),
             drones: fleet
                 .iter()
                 .map(|v| SetupDrone::new(&v.name, v.start, &body_from_camera, v.altitude))

@@ -61,6 +61,11 @@ pub struct Setup {
     /// from older logs, whose drones without a frontier hovered).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stage_back_m: Option<f64>,
+    /// Whether paths at a thinner radius kept the widest one's distance from the walls where
+    /// they could (`nav::mission::centring_comfort`; absent from older logs, whose paths were
+    /// shortest at every radius).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub centre_paths: Option<bool>,
     /// The drones.
     pub drones: Vec<SetupDrone>,
 }

@@ -24,7 +24,7 @@ use gcs::record::DroneState;
 use gcs::record::Setup;
 use gcs::runtime::RuntimeConfig;
 use gcs::runtime::perception::{SensorSample, sensors_at, slam_frame};
-use nav::mission::{PlannerConfig, Strategy};
+use nav::mission::{PlannerConfig, Strategy, centring_comfort};
 
 /// Arguments of `gcs replay`.
 #[derive(Args, Debug, Clone)]
@@ -329,11 +329,18 @@ pub(crate) fn planner_configs(setup: &Setup) -> Vec<PlannerConfig> {
         "greedy" => Strategy::Greedy,
         _ => Strategy::Hungarian,
     };
+    let centre = setup.centre_paths.unwrap_or(false);
     radii
-        .into_iter()
-        .map(|robot_radius_m| PlannerConfig {
+        .iter()
+        .map(|&robot_radius_m| PlannerConfig {
             strategy,
             robot_radius_m,
+            // …and planned shortest paths at every radius.
+            comfort_m: if centre {
+                centring_comfort(&radii, robot_radius_m)
+            } else {
+                0.0
+            },
             region_radius_m: setup.region_radius_m.unwrap_or(0.0),
             // Logs from before the margin planned without one.
             hold_margin_m: setup.hold_margin_m.unwrap_or(0.0),
@@ -463,6 +470,7 @@ mod tests {
             max_pocket_m2: None,
             turn_m_per_rad: None,
             stage_back_m: None,
+            centre_paths: None,
             drones: vec![],
         });
         assert_eq!(configs.len(), RuntimeConfig::default().planner_radii.len());
@@ -472,7 +480,8 @@ mod tests {
             && c.hold_margin_m == 0.0
             && c.max_pocket_m2 == 0.0
             && c.turn_m_per_rad == 0.0
-            && c.stage_back_m == 0.0));
+            && c.stage_back_m == 0.0
+            && c.comfort_m == 0.0));
         let with_regions = planner_configs(&Setup {
             version: 1,
             world: None,
@@ -483,6 +492,7 @@ mod tests {
             max_pocket_m2: Some(0.4),
             turn_m_per_rad: Some(0.9),
             stage_back_m: Some(1.5),
+            centre_paths: Some(true),
             drones: vec![],
         });
         assert_eq!(with_regions.len(), 1);
@@ -491,6 +501,8 @@ mod tests {
         assert_eq!(with_regions[0].max_pocket_m2, 0.4);
         assert_eq!(with_regions[0].turn_m_per_rad, 0.9);
         assert_eq!(with_regions[0].stage_back_m, 1.5);
+        // One radius: no wider one to keep the distance of.
+        assert_eq!(with_regions[0].comfort_m, 0.0);
         assert_eq!(with_regions[0].strategy, Strategy::Greedy);
         let robots = [Some([0.5, 1.0])];
         let live = nav::mission::plan_first_open(&grid, &robots, &configs)

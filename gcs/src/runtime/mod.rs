@@ -27,7 +27,7 @@ use std::time::Duration;
 use link::{LinkStatus, Sticks, Telemetry};
 use nav::blacklist::Blacklist;
 use nav::grid::Grid;
-use nav::mission::{PlannerConfig, Strategy};
+use nav::mission::{PlannerConfig, Strategy, centring_comfort};
 use slam::system::{RobotState, Slam};
 
 use crate::clock::Clock;
@@ -60,6 +60,10 @@ pub struct RuntimeConfig {
     /// A drone left without a frontier waits this far short of another drone's
     /// ([`PlannerConfig::stage_back_m`]), metres of path; 0: it hovers where it is.
     pub stage_back_m: f64,
+    /// Paths planned at a thinner radius than the widest keep, where they can, the widest
+    /// one's distance from the walls ([`nav::mission::centring_comfort`]): through the middle of a door, not
+    /// along its jamb.
+    pub centre_paths: bool,
     /// Control period, seconds (mission clock).
     pub control_period: f64,
     /// Mission-planner period, seconds.
@@ -89,6 +93,7 @@ impl Default for RuntimeConfig {
             max_pocket_m2: PlannerConfig::default().max_pocket_m2,
             turn_m_per_rad: PlannerConfig::default().turn_m_per_rad,
             stage_back_m: PlannerConfig::default().stage_back_m,
+            centre_paths: true,
             control_period: 0.1,
             plan_period: 1.0,
             drone: DroneConfig::default(),
@@ -859,11 +864,15 @@ impl Mission {
             .iter()
             .map(|&k| self.drones[k].plan_heading(&self.config.drone))
             .collect();
-        let configs: Vec<PlannerConfig> = self
-            .config
-            .planner_radii
+        let radii = &self.config.planner_radii;
+        let configs: Vec<PlannerConfig> = radii
             .iter()
             .map(|&robot_radius_m| PlannerConfig {
+                comfort_m: if self.config.centre_paths {
+                    centring_comfort(radii, robot_radius_m)
+                } else {
+                    0.0
+                },
                 strategy: self.config.strategy,
                 robot_radius_m,
                 blacklist: self.blacklist.ignored(),
@@ -1040,7 +1049,13 @@ impl Mission {
         let Some(grid) = self.grid.clone() else {
             return;
         };
-        let radius = self.config.planner_radii.last().copied().unwrap_or(0.25);
+        let radii = &self.config.planner_radii;
+        let radius = radii.last().copied().unwrap_or(0.25);
+        let comfort_m = if self.config.centre_paths {
+            centring_comfort(radii, radius)
+        } else {
+            0.0
+        };
         for d in &mut self.drones {
             if d.phase != Phase::Returning {
                 continue;
@@ -1048,13 +1063,7 @@ impl Mission {
             let (Some(p), Some(home)) = (d.pose(), d.goal) else {
                 continue;
             };
-            match nav::mission::route(
-                &grid,
-                [p[0], p[1]],
-                home,
-                radius,
-                PlannerConfig::default().comfort_m,
-            ) {
+            match nav::mission::route(&grid, [p[0], p[1]], home, radius, comfort_m) {
                 Some(path) => d.set_home_path(path),
                 None => {
                     // No known way home: land where it is.
