@@ -46,9 +46,9 @@ pub struct PlannerConfig {
     pub look_around_shift_m: f64,
     /// Paths keep this far from the inflated obstacles where they can (through the middle of
     /// a door rather than along its frame), metres: see [`crate::clearance`]. 0 (the default):
-    /// shortest paths. The mission runtime gives plans at its thinner radii the difference to
-    /// the widest ([`centring_comfort`]), and [`plan_first_open`] does the same on a path lent
-    /// by a thinner configuration. (0.3 m on every plan, tried early on, cut collisions on true
+    /// shortest paths. The mission runtime can give plans at its thinner radii the difference
+    /// to the widest ([`centring_comfort`]; `gcs explore --centre-paths true`, off by default),
+    /// and [`plan_first_open`] does the same on a path lent by a thinner configuration. (0.3 m on every plan, tried early on, cut collisions on true
     /// poses but mapped less on SLAM poses, when the SLAM was far weaker.)
     pub comfort_m: f64,
     /// A frontier whose goal no robot can reach is given, as its goal, the reachable cell

@@ -61,8 +61,10 @@ pub struct RuntimeConfig {
     /// ([`PlannerConfig::stage_back_m`]), metres of path; 0: it hovers where it is.
     pub stage_back_m: f64,
     /// Paths planned at a thinner radius than the widest keep, where they can, the widest
-    /// one's distance from the walls ([`nav::mission::centring_comfort`]): through the middle of a door, not
-    /// along its jamb.
+    /// one's distance from the walls ([`nav::mission::centring_comfort`]): through the middle
+    /// of a door, not along its jamb. Off by default: with it, a three-drone mission of the
+    /// fault tests left its last drone hovering without a path for 390 s, twice in ten runs,
+    /// not yet understood.
     pub centre_paths: bool,
     /// Control period, seconds (mission clock).
     pub control_period: f64,
@@ -93,7 +95,7 @@ impl Default for RuntimeConfig {
             max_pocket_m2: PlannerConfig::default().max_pocket_m2,
             turn_m_per_rad: PlannerConfig::default().turn_m_per_rad,
             stage_back_m: PlannerConfig::default().stage_back_m,
-            centre_paths: true,
+            centre_paths: false,
             control_period: 0.1,
             plan_period: 1.0,
             drone: DroneConfig::default(),
