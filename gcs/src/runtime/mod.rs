@@ -63,7 +63,7 @@ pub struct RuntimeConfig {
     /// Paths planned at a thinner radius than the widest keep, where they can, the widest
     /// one's distance from the walls ([`nav::mission::centring_comfort`]): through the middle
     /// of a door, not along its jamb. Off by default: with it, a three-drone mission of the
-    /// fault tests left its last drone hovering without a path for 390 s, twice in ten runs,
+    /// fault tests left its last drone hovering without a path for 390 s, twice in nine runs,
     /// not yet understood.
     pub centre_paths: bool,
     /// Control period, seconds (mission clock).
