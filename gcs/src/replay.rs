@@ -336,11 +336,7 @@ pub(crate) fn planner_configs(setup: &Setup) -> Vec<PlannerConfig> {
             strategy,
             robot_radius_m,
             // …and planned shortest paths at every radius.
-            comfort_m: if centre {
-                centring_comfort(&radii, robot_radius_m)
-            } else {
-                0.0
-            },
+            comfort_m: centring_comfort(centre, &radii, robot_radius_m),
             region_radius_m: setup.region_radius_m.unwrap_or(0.0),
             // Logs from before the margin planned without one.
             hold_margin_m: setup.hold_margin_m.unwrap_or(0.0),

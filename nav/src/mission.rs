@@ -420,13 +420,17 @@ pub fn cut_short(path: &[[f64; 2]], back_m: f64) -> Vec<[f64; 2]> {
 }
 
 /// The comfort distance ([`PlannerConfig::comfort_m`]) of a plan at `radius` among the planner's
-/// `radii`: what the widest of them keeps beyond it. A plan at the thinnest radius (0.25 m for
+/// `radii` when paths are `centred`: what the widest of them keeps beyond it (0 when they are
+/// not: shortest paths). A plan at the thinnest radius (0.25 m for
 /// the 0.2 m drone) is made when a door is too narrow on the map for the wider ones, and its
 /// shortest path grazes the door's jamb with 5 cm to spare, more where it turns just past the
 /// door and the path follower cuts the corner. On true poses, four drones, drones passed the
 /// west doors of the apartment 0.1–0.2 m off their middle, toward the jamb on the inside of the
 /// turn, and most near misses were there.
-pub fn centring_comfort(radii: &[f64], radius: f64) -> f64 {
+pub fn centring_comfort(centred: bool, radii: &[f64], radius: f64) -> f64 {
+    if !centred {
+        return 0.0;
+    }
     let widest = radii.iter().copied().fold(radius, f64::max);
     widest - radius
 }
@@ -959,6 +963,16 @@ mod tests {
         grid_with(&rows, 0.1)
     }
 
+    /// Where `path` crosses the row of [`hall_and_room`]'s door (y = 2.55 m), or None if it
+    /// does not.
+    fn through_door(path: &[[f64; 2]]) -> Option<f64> {
+        path.windows(2).find_map(|w| {
+            let ([ax, ay], [bx, by]) = (w[0], w[1]);
+            ((ay - 2.55) * (by - 2.55) <= 0.0 && ay != by)
+                .then(|| ax + (bx - ax) * (2.55 - ay) / (by - ay))
+        })
+    }
+
     #[test]
     fn a_robot_left_without_a_frontier_gets_one_behind_a_door_only_a_thinner_radius_passes() {
         let g = hall_and_room(0);
@@ -1005,14 +1019,6 @@ mod tests {
             look_around_room_m: 0.0,
             ..Default::default()
         };
-        // Where a path crosses the door's row, or None if it does not.
-        let through_door = |path: &[[f64; 2]]| {
-            path.windows(2).find_map(|w| {
-                let ([ax, ay], [bx, by]) = (w[0], w[1]);
-                ((ay - 2.55) * (by - 2.55) <= 0.0 && ay != by)
-                    .then(|| ax + (bx - ax) * (2.55 - ay) / (by - ay))
-            })
-        };
         // Lent to robot 1 by the thin radius after the wide one: through the door's middle
         // (0.4 m from either jamb), to the cell.
         let robots = [Some([0.8, 1.5]), Some([1.6, 0.6])];
@@ -1049,15 +1055,9 @@ mod tests {
             look_around_room_m: 0.0,
             ..Default::default()
         };
-        let through_door = |path: &[[f64; 2]]| {
-            path.windows(2).find_map(|w| {
-                let ([ax, ay], [bx, by]) = (w[0], w[1]);
-                ((ay - 2.55) * (by - 2.55) <= 0.0 && ay != by)
-                    .then(|| ax + (bx - ax) * (2.55 - ay) / (by - ay))
-            })
-        };
-        assert_eq!(centring_comfort(&radii, 0.45), 0.0);
-        assert!((centring_comfort(&radii, 0.25) - 0.2).abs() < 1e-12);
+        assert_eq!(centring_comfort(true, &radii, 0.45), 0.0);
+        assert_eq!(centring_comfort(false, &radii, 0.25), 0.0);
+        assert!((centring_comfort(true, &radii, 0.25) - 0.2).abs() < 1e-12);
         let robots = [Some([1.6, 0.6])];
         let crossing = |comfort: &dyn Fn(f64) -> f64| {
             let configs: Vec<PlannerConfig> =
@@ -1068,7 +1068,7 @@ mod tests {
             through_door(&r.path).unwrap_or_else(|| panic!("not through the door: {r:?}"))
         };
         // Centred: through the door's middle (0.4 m from either jamb), to the cell.
-        let x = crossing(&|r| centring_comfort(&radii, r));
+        let x = crossing(&|r| centring_comfort(true, &radii, r));
         assert!((x - 4.4).abs() < 0.06, "{x}");
         // Shortest: round the west jamb at the 0.25 m inflation.
         let x = crossing(&|_| 0.0);

@@ -870,11 +870,7 @@ impl Mission {
         let configs: Vec<PlannerConfig> = radii
             .iter()
             .map(|&robot_radius_m| PlannerConfig {
-                comfort_m: if self.config.centre_paths {
-                    centring_comfort(radii, robot_radius_m)
-                } else {
-                    0.0
-                },
+                comfort_m: centring_comfort(self.config.centre_paths, radii, robot_radius_m),
                 strategy: self.config.strategy,
                 robot_radius_m,
                 blacklist: self.blacklist.ignored(),
@@ -1053,11 +1049,7 @@ impl Mission {
         };
         let radii = &self.config.planner_radii;
         let radius = radii.last().copied().unwrap_or(0.25);
-        let comfort_m = if self.config.centre_paths {
-            centring_comfort(radii, radius)
-        } else {
-            0.0
-        };
+        let comfort_m = centring_comfort(self.config.centre_paths, radii, radius);
         for d in &mut self.drones {
             if d.phase != Phase::Returning {
                 continue;
