@@ -92,8 +92,7 @@ pub struct SimArgs {
     pub stage_back: f64,
     /// Paths planned at a thinner radius than the widest (a door too narrow on the map for the
     /// wider ones) keep the widest one's distance from the walls where they can: through the
-    /// middle of a door, not along its jamb (off by default: not yet reliable, see
-    /// `docs/exploration-history.md`, stop 66); `false`: shortest paths.
+    /// middle of a door, not along its jamb; `false`: shortest paths.
     #[arg(long, value_name = "BOOL", default_value_t = RuntimeConfig::default().centre_paths, action = clap::ArgAction::Set)]
     pub centre_paths: bool,
     /// A drone flies nowhere faster than this, m/s (slower into a sharp bend of its path).

@@ -47,7 +47,7 @@ pub struct PlannerConfig {
     /// Paths keep this far from the inflated obstacles where they can (through the middle of
     /// a door rather than along its frame), metres: see [`crate::clearance`]. 0 (the default):
     /// shortest paths. The mission runtime can give plans at its thinner radii the difference
-    /// to the widest ([`centring_comfort`]; `gcs explore --centre-paths true`, off by default),
+    /// to the widest ([`centring_comfort`]; on in `gcs explore` unless `--centre-paths false`),
     /// and [`plan_first_open`] does the same on a path lent by a thinner configuration. (0.3 m on every plan, tried early on, cut collisions on true
     /// poses but mapped less on SLAM poses, when the SLAM was far weaker.)
     pub comfort_m: f64,
@@ -177,6 +177,10 @@ pub struct Plan {
     pub robots: Vec<RobotPlan>,
     /// No frontier is left that any robot with a valid pose can reach.
     pub complete: bool,
+    /// Some robot had a free cell near it to plan from. Without one the plan cannot tell
+    /// whether anything is left (`complete` is false): a robot in a passage narrower than twice
+    /// the radius has none.
+    pub placed: bool,
 }
 
 /// A robot position the planner cannot use.
@@ -206,7 +210,9 @@ pub enum PlanError {
 
 /// One planner step with a fallback: plans with each configuration in turn (a mission lists
 /// them widest robot radius first) and keeps the first plan that leaves a frontier to explore,
-/// else the last one — a map whose last frontiers lie behind a narrow door is explored with a
+/// else the last one (one in which no robot has room to start, [`Plan::placed`], is passed
+/// over: else a robot in a passage only a thinner radius fits would hover there for good, the
+/// wide plan neither giving it a goal nor ending the mission) — a map whose last frontiers lie behind a narrow door is explored with a
 /// thinner margin rather than declared complete; a robot that plan leaves without a frontier
 /// gets one a thinner configuration reaches and no other robot has (`lend_to_idle`), on a path
 /// that keeps the plan's radius where it can ([`PlannerConfig::comfort_m`] at least the
@@ -236,7 +242,11 @@ pub fn plan_first_open(
     let mut chosen = None;
     for (k, config) in configs.iter().enumerate() {
         let mut step = plan(map, robots, &strict(config))?;
-        let (open, none_seen) = (!step.complete, step.frontiers.is_empty());
+        // A configuration no robot fits where it is says nothing: the next, thinner, one may.
+        let (open, none_seen) = (
+            !step.complete && (step.placed || k + 1 == configs.len()),
+            step.frontiers.is_empty(),
+        );
         if open {
             for thinner in &configs[k + 1..] {
                 let thinner = PlannerConfig {
@@ -542,22 +552,7 @@ pub fn plan(
                 .collect()
         })
         .collect();
-    let largest = raw.iter().flatten().flatten().copied().fold(0.0, f64::max);
-    let costs: Vec<Vec<f64>> = raw
-        .iter()
-        .zip(&reached)
-        .map(|(row, f)| {
-            row.iter()
-                .map(|c| {
-                    if f.is_none() {
-                        largest + 10.0
-                    } else {
-                        c.unwrap_or(largest + 1.0)
-                    }
-                })
-                .collect()
-        })
-        .collect();
+    let costs = thesis_costs(&raw, &reached);
     let assignment = if frontiers.is_empty() {
         vec![None; robots.len()]
     } else {
@@ -565,25 +560,22 @@ pub fn plan(
         let centres: Vec<[f64; 2]> = goals.iter().map(|&g| inflated.center_of(g)).collect();
         let held = held_frontiers(&raw, &centres, &config.held);
         let turns = turns(&reached, &config.headings, config);
+        // What the assignment weighs: the paths with their turns and the held frontiers' margin;
+        // the unreachable pairs priced above the dearest of these, not of the paths alone (a
+        // half turn adds 2.2 m: a frontier behind a robot then cost more than one it cannot
+        // reach, and it hovered).
+        let weighed = holding(turning(raw.clone(), &turns), &held, config.hold_margin_m);
         match config.strategy {
             // The thesis pads the matrix to square with zero-cost dummies; the rectangular solver
             // reaches the same optimum without the O(n³) cost of the padding.
-            Strategy::Hungarian => spread(
-                &holding(turning(costs.clone(), &turns), &held, config.hold_margin_m),
-                &region,
-                hungarian,
-            ),
+            Strategy::Hungarian => spread(&thesis_costs(&weighed, &reached), &region, hungarian),
             Strategy::Greedy => {
                 // The baseline only considers pairs that can actually be flown.
-                let usable: Vec<Vec<f64>> = raw
+                let usable: Vec<Vec<f64>> = weighed
                     .iter()
                     .map(|r| r.iter().map(|c| c.unwrap_or(f64::INFINITY)).collect())
                     .collect();
-                spread(
-                    &holding(turning(usable, &turns), &held, config.hold_margin_m),
-                    &region,
-                    greedy,
-                )
+                spread(&usable, &region, greedy)
             }
         }
     };
@@ -637,6 +629,7 @@ pub fn plan(
         robot_radius_m: config.robot_radius_m,
         ignored,
         complete: any_valid && !reachable,
+        placed: any_valid,
         frontiers,
         costs,
         robots: robots_out,
@@ -700,21 +693,46 @@ fn turns(
         .collect()
 }
 
-/// `cost` (robots × frontiers) with each robot's turns (`turns`, as [`turns`] gives them) added.
-fn turning(mut cost: Vec<Vec<f64>>, turns: &[Vec<f64>]) -> Vec<Vec<f64>> {
+/// Robots × frontiers, `cost` (metres, `None` where unreachable) after the thesis's rules, as
+/// [`Plan::costs`] gives them: unreachable → the largest cost plus 1, a robot without a start
+/// (no search: `reached[r]` is `None`) → the largest plus 10.
+fn thesis_costs(cost: &[Vec<Option<f64>>], reached: &[Option<Reached>]) -> Vec<Vec<f64>> {
+    let largest = cost.iter().flatten().flatten().copied().fold(0.0, f64::max);
+    cost.iter()
+        .zip(reached)
+        .map(|(row, searched)| {
+            row.iter()
+                .map(|c| match searched {
+                    None => largest + 10.0,
+                    Some(_) => c.unwrap_or(largest + 1.0),
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// `cost` (robots × frontiers, `None` where unreachable) with each robot's turns (`turns`, as
+/// [`turns`] gives them) added.
+fn turning(mut cost: Vec<Vec<Option<f64>>>, turns: &[Vec<f64>]) -> Vec<Vec<Option<f64>>> {
     for (row, turns) in cost.iter_mut().zip(turns) {
         for (c, t) in row.iter_mut().zip(turns) {
-            *c += t;
+            if let Some(c) = c {
+                *c += t;
+            }
         }
     }
     cost
 }
 
-/// `cost` (robots × frontiers) with each robot's held frontier `margin` cheaper (not below 0):
-/// what the assignment weighs.
-fn holding(mut cost: Vec<Vec<f64>>, held: &[Option<usize>], margin: f64) -> Vec<Vec<f64>> {
+/// `cost` (robots × frontiers, `None` where unreachable) with each robot's held frontier
+/// `margin` cheaper (not below 0).
+fn holding(
+    mut cost: Vec<Vec<Option<f64>>>,
+    held: &[Option<usize>],
+    margin: f64,
+) -> Vec<Vec<Option<f64>>> {
     for (row, f) in cost.iter_mut().zip(held) {
-        if let Some(c) = f.and_then(|f| row.get_mut(f)) {
+        if let Some(Some(c)) = f.and_then(|f| row.get_mut(f)) {
             *c = (*c - margin).max(0.0);
         }
     }
@@ -1535,6 +1553,49 @@ mod tests {
     }
 
     #[test]
+    fn a_robot_in_a_passage_only_a_thinner_radius_fits_is_planned_with_that_radius() {
+        // A room explored to its walls and a dead-end passage 0.7 m wide and 4 m long off it,
+        // 0.1 m cells; the robot 2 m down the passage. The widest radius has no free cell within
+        // reach of it, so it says nothing about what is left; the thinner one does: nothing.
+        let room = format!("#{}#", ".".repeat(30));
+        let passage = format!("#{}{}", ".".repeat(7), "#".repeat(24));
+        let wall = "#".repeat(32);
+        let rows: Vec<&str> = [wall.as_str()]
+            .into_iter()
+            .chain([passage.as_str(); 40])
+            .chain([room.as_str(); 20])
+            .chain([wall.as_str()])
+            .collect();
+        let g = grid_with(&rows, 0.1);
+        let robot = [Some([0.45, 4.1])];
+        let radius = |robot_radius_m| PlannerConfig {
+            robot_radius_m,
+            ..Default::default()
+        };
+        let wide = plan(&g, &robot, &radius(0.45)).unwrap();
+        assert_eq!(
+            wide.robots[0].hover_reason,
+            Some("no free cell near the robot")
+        );
+        assert!(!wide.complete);
+        let p = plan_first_open(&g, &robot, &[radius(0.45), radius(0.25)])
+            .unwrap()
+            .unwrap();
+        assert_eq!(p.robot_radius_m, 0.25);
+        assert!(p.complete);
+        // With somewhere to go, the thinner radius takes the robot there.
+        let door = format!("#{}?", ".".repeat(30));
+        let mut open = rows.clone();
+        open[44..54].fill(&door);
+        let g = grid_with(&open, 0.1);
+        let p = plan_first_open(&g, &robot, &[radius(0.45), radius(0.25)])
+            .unwrap()
+            .unwrap();
+        assert!(!p.complete);
+        assert!(p.robots[0].goal.is_some(), "{:?}", p.robots[0]);
+    }
+
+    #[test]
     fn plans_on_real_buildings() {
         for (file, seeds) in [
             ("willow-full.yaml", vec![[12.0, 30.0], [20.0, 30.0]]),
@@ -1638,5 +1699,19 @@ mod tests {
         let other = 1 - reachable;
         assert!(p.costs[0][other] > p.costs[0][reachable], "{:?}", p.costs);
         assert!(!p.complete);
+        // Nor does the turn to face a reachable frontier's path make the walled-off one the
+        // cheaper: facing east, the west frontier (0.5 m away) weighs 0.5 m + a half turn
+        // (2.2 m), more than the largest reachable cost plus 1. The unreachable frontier's cost
+        // counted from the paths alone left a drone of a three-drone mission hovering without
+        // a goal for 330 s until the timeout, its plan never complete.
+        let facing_east = PlannerConfig {
+            headings: vec![Some(0.0)],
+            turn_m_per_rad: 0.7,
+            ..toy_config()
+        };
+        let p = plan(&map, &[Some([0.6, 0.6])], &facing_east).unwrap();
+        let r = &p.robots[0];
+        assert_eq!(r.frontier, Some(reachable), "{r:?}");
+        assert!(!r.path.is_empty(), "{r:?}");
     }
 }

@@ -16,6 +16,7 @@ pub mod battery;
 pub mod drone;
 pub mod perception;
 mod planning;
+pub mod stall;
 pub mod trail;
 
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -35,6 +36,7 @@ use crate::record::{PlannedGoal, Record, Recorder};
 use drone::{Drone, DroneConfig, DroneEvent, DroneSpec, Phase};
 use perception::{CameraFrame, Perception, PerceptionResult, SensorLog, SensorSample, SlamView};
 use planning::{Ask, Planner, PlannerStopped};
+use stall::{STALL_S, Stall};
 use trail::Trail;
 
 /// Mission settings.
@@ -62,9 +64,8 @@ pub struct RuntimeConfig {
     pub stage_back_m: f64,
     /// Paths planned at a thinner radius than the widest keep, where they can, the widest
     /// one's distance from the walls ([`nav::mission::centring_comfort`]): through the middle
-    /// of a door, not along its jamb. Off by default: with it, a three-drone mission of the
-    /// fault tests left its last drone hovering without a path for 390 s, twice in nine runs,
-    /// not yet understood.
+    /// of a door, not along its jamb. On by default (off from stop 66 for a hang that turned
+    /// out to be the planner's, not this: see [`stall`]).
     pub centre_paths: bool,
     /// Control period, seconds (mission clock).
     pub control_period: f64,
@@ -95,7 +96,7 @@ impl Default for RuntimeConfig {
             max_pocket_m2: PlannerConfig::default().max_pocket_m2,
             turn_m_per_rad: PlannerConfig::default().turn_m_per_rad,
             stage_back_m: PlannerConfig::default().stage_back_m,
-            centre_paths: false,
+            centre_paths: true,
             control_period: 0.1,
             plan_period: 1.0,
             drone: DroneConfig::default(),
@@ -189,6 +190,9 @@ pub enum Outcome {
     LandAll,
     /// No drone was left flying (links lost, landed by their failsafes).
     NoDroneLeft,
+    /// The planner gave no drone a goal for [`STALL_S`] while it counted a frontier as
+    /// reachable ([`stall`]).
+    Stalled,
 }
 
 impl Outcome {
@@ -199,6 +203,7 @@ impl Outcome {
             Outcome::TimedOut => "timed out",
             Outcome::LandAll => "land all",
             Outcome::NoDroneLeft => "no drone left",
+            Outcome::Stalled => "stalled",
         }
     }
 }
@@ -385,6 +390,7 @@ impl Runtime {
             last_plan_record: f64::NEG_INFINITY,
             planner,
             planner_lost: false,
+            stall: Stall::default(),
         };
         let thread = {
             let done = done.clone();
@@ -486,6 +492,8 @@ struct Mission {
     planner: Planner,
     /// The planner's thread stopped (and every drone was told to land).
     planner_lost: bool,
+    /// Plans that give no drone a goal while something is left.
+    stall: Stall,
 }
 
 impl Mission {
@@ -989,6 +997,26 @@ impl Mission {
                 grid: grid.clone(),
             });
             self.last_plan_record = asked;
+        }
+        let going = plan.robots.iter().any(|r| r.goal.is_some());
+        if self.stall.observe(now, !plan.complete, going) >= STALL_S {
+            let why: Vec<String> = exploring
+                .iter()
+                .zip(&plan.robots)
+                .map(|(&k, r)| {
+                    let reason = r.hover_reason.unwrap_or("no goal");
+                    format!("{}: {reason}", self.drones[k].name)
+                })
+                .collect();
+            self.say(
+                now,
+                format!(
+                    "stalled: no drone has had a goal for {STALL_S:.0} s, yet the planner counts a frontier as reachable ({}): landing",
+                    why.join("; ")
+                ),
+            );
+            self.finish(Outcome::Stalled);
+            return;
         }
         if answer.ending && plan.complete {
             let elapsed = self.started.map_or(0.0, |s| now - s);
