@@ -84,13 +84,23 @@ impl Pid {
     /// position loop) instead of differenced from the last error. A non-finite rate gives no
     /// derivative term.
     pub fn update_with_rate(&mut self, error: f64, rate: f64, dt: f64) -> f64 {
+        self.step(error, rate, dt, true)
+    }
+
+    /// One update as [`Pid::update_with_rate`] that leaves the integral as it is: the loop
+    /// flies on what it has integrated so far without adding to it.
+    pub fn update_frozen(&mut self, error: f64, rate: f64, dt: f64) -> f64 {
+        self.step(error, rate, dt, false)
+    }
+
+    fn step(&mut self, error: f64, rate: f64, dt: f64, integrate: bool) -> f64 {
         if !(error.is_finite() && dt.is_finite() && dt > 0.0) {
             return 0.0;
         }
         let g = self.gains;
         let derivative = if rate.is_finite() { rate } else { 0.0 };
         self.previous = Some(error);
-        let mut integral = self.integral + error * dt;
+        let mut integral = self.integral + if integrate { error * dt } else { 0.0 };
         if g.ki != 0.0 {
             let cap = g.integral_limit / g.ki.abs();
             integral = integral.clamp(-cap, cap);
@@ -228,6 +238,8 @@ pub struct PositionController {
     recent: Option<Reference>,
     /// The next update's setpoint is a new target ([`PositionController::target_jumps`]).
     jumps: bool,
+    /// The x and y loops add to their integrals ([`PositionController::integrate_xy`]).
+    integrating_xy: bool,
 }
 
 impl PositionController {
@@ -241,7 +253,16 @@ impl PositionController {
             reference: None,
             recent: None,
             jumps: false,
+            integrating_xy: true,
         }
+    }
+
+    /// Whether the x and y loops add to their integrals (they do unless told otherwise). Off,
+    /// they fly on what they have integrated: a drone pursuing a carrot always trails it by the
+    /// follower's lead, and integrated that lead winds the loops up in the way it flies, a push
+    /// that stays after it stops to hold a spot.
+    pub fn integrate_xy(&mut self, on: bool) {
+        self.integrating_xy = on;
     }
 
     /// The next update's setpoint is a new target (a new path's carrot, a new spot to hold),
@@ -341,8 +362,17 @@ impl PositionController {
             self.reference.get_or_insert(now);
             self.recent = Some(now);
         }
-        let ax = self.x.update_with_rate(steer[0] - estimate.x, rate[0], dt);
-        let ay = self.y.update_with_rate(steer[1] - estimate.y, rate[1], dt);
+        let (ax, ay) = if self.integrating_xy {
+            (
+                self.x.update_with_rate(steer[0] - estimate.x, rate[0], dt),
+                self.y.update_with_rate(steer[1] - estimate.y, rate[1], dt),
+            )
+        } else {
+            (
+                self.x.update_frozen(steer[0] - estimate.x, rate[0], dt),
+                self.y.update_frozen(steer[1] - estimate.y, rate[1], dt),
+            )
+        };
         let (s, c) = estimate.yaw.sin_cos();
         let forward = c * ax + s * ay;
         let left = -s * ax + c * ay;
@@ -414,6 +444,45 @@ mod tests {
             "{:?}",
             &after_3s[..5]
         );
+    }
+
+    #[test]
+    fn with_the_xy_integrals_frozen_a_lead_winds_nothing_up_and_what_was_integrated_stays() {
+        let gains = PositionGains {
+            x: PidGains::pid(0.3, 0.02, 0.0),
+            y: PidGains::pid(0.3, 0.02, 0.0),
+            ..PositionGains::default()
+        };
+        let mut c = PositionController::new(gains);
+        let at = |x: f64| Pose3 {
+            x,
+            y: 0.0,
+            z: 1.0,
+            yaw: 0.0,
+        };
+        // Held 0.5 m short of a spot for 10 s: the x loop integrates 5 m·s.
+        for _ in 0..100 {
+            c.update(&at(0.5), &at(0.0), 0.1);
+        }
+        let held = c.x.integral_term();
+        assert!((held - 0.1).abs() < 1e-9, "{held}");
+        // Then 40 s behind a carrot 0.4 m ahead, frozen: nothing added, and the sticks are the
+        // proportional part and what was integrated before.
+        c.integrate_xy(false);
+        let mut pitch = 0.0;
+        for k in 0..400 {
+            let x = 0.05 * f64::from(k);
+            pitch = c.update(&at(x + 0.4), &at(x), 0.1).pitch;
+        }
+        assert_eq!(c.x.integral_term(), held);
+        assert!((pitch - (0.3 * 0.4 + held)).abs() < 1e-9, "{pitch}");
+        // Integrating again, the same lead winds it up.
+        c.integrate_xy(true);
+        for k in 0..100 {
+            let x = 0.05 * f64::from(k);
+            c.update(&at(x + 0.4), &at(x), 0.1);
+        }
+        assert!(c.x.integral_term() > held + 0.07, "{}", c.x.integral_term());
     }
 
     #[test]

@@ -109,6 +109,12 @@ pub struct DroneConfig {
     pub gains: PositionGains,
     /// Path follower.
     pub follower: FollowerConfig,
+    /// Pursuing a carrot, the roll and pitch sticks lean this much per m/s of the speed the
+    /// follower allows there, toward the carrot: what carries the drone against the air's drag
+    /// (in SITL, drag of 0.6 per second against a lean of 20° at full stick: 0.175), so the x/y
+    /// integrals need not, and they are frozen meanwhile. 0: no feed-forward, and the
+    /// integrals integrate the follower's lead as they do any error.
+    pub cruise_ff: f64,
     /// Pose filter.
     pub ekf: EkfConfig,
     /// Holding still (a look around, a turn, a hover), an error under this is not flown: the
@@ -247,6 +253,7 @@ impl Default for DroneConfig {
                 turn_threshold_rad: 90f64.to_radians(),
                 ..FollowerConfig::default()
             },
+            cruise_ff: 0.175,
             ekf: EkfConfig::default(),
             hold_band_m: 0.1,
             keep_clear: KeepClear::default(),
@@ -1372,9 +1379,21 @@ impl Drone {
         if self.flown.replace(target).is_some_and(|was| was != target) {
             self.controller.target_jumps();
         }
+        let cruise = self.tracking && config.cruise_ff > 0.0;
+        self.controller.integrate_xy(!cruise);
         let mut c = self
             .controller
             .update_steered(&setpoint, self.setpoint, &estimate, dt);
+        let ahead = [self.setpoint[0] - here[0], self.setpoint[1] - here[1]];
+        let lead = ahead[0].hypot(ahead[1]);
+        let speed = self.speed_limit.min(config.follower.max_speed_mps);
+        if cruise && lead > 1e-6 && speed.is_finite() {
+            let push = config.cruise_ff * speed / lead;
+            let (s, co) = estimate.yaw.sin_cos();
+            let (bx, by) = (ahead[0] * push, ahead[1] * push);
+            c.pitch = (c.pitch + co * bx + s * by).clamp(-1.0, 1.0);
+            c.roll = (c.roll + s * bx - co * by).clamp(-1.0, 1.0);
+        }
         // Near a wall the controller flies even a small error: its derivative term brakes.
         if !self.tracking
             && self.setpoint == self.hold
@@ -2101,6 +2120,46 @@ mod tests {
     }
 
     #[test]
+    fn pursuing_a_carrot_the_sticks_lean_toward_it_by_the_cruise_feed_forward() {
+        // East along y = 0 at 0.5 m/s, facing 60° left of the path (a bend flown while turning):
+        // the sticks at the last of six ticks, with and without the feed-forward.
+        let last_sticks = |config: &DroneConfig| {
+            let mut drone = exploring_drone(Arc::default(), config);
+            drone.set_plan(Some([5.0, 0.0]), vec![[0.0, 0.0], [5.0, 0.0]], None, 0.0);
+            for i in 1..=6 {
+                let t = 0.1 * f64::from(i);
+                drone.slam_fix(
+                    t,
+                    [0.5 * t, 0.0, 0.9],
+                    std::f64::consts::FRAC_PI_3,
+                    None,
+                    false,
+                );
+                drone.tick(t, config);
+            }
+            assert!(drone.tracking, "pursuing its carrot");
+            let s = drone.sticks.expect("sticks");
+            let yaw = drone.pose().expect("a pose")[3];
+            (f64::from(s.pitch), f64::from(s.roll), yaw)
+        };
+        let config = DroneConfig::default();
+        let off = DroneConfig {
+            cruise_ff: 0.0,
+            ..config.clone()
+        };
+        let (with, without) = (last_sticks(&config), last_sticks(&off));
+        // 0.175 × 0.7 m/s (the follower's top speed on a straight path) toward the carrot, due
+        // east: the cosine of the heading (the filter's, on its way to 60°) of it forward, the
+        // sine to the right. (Without, the integral has wound up by less than 0.005 in 0.6 s.)
+        let push = config.cruise_ff * config.follower.max_speed_mps;
+        let (pitch, roll) = (with.0 - without.0, with.1 - without.1);
+        let yaw = with.2;
+        assert!(yaw > 0.5, "turned toward 60°: {yaw}");
+        assert!((pitch - yaw.cos() * push).abs() < 0.01, "pitch {pitch}");
+        assert!((roll - yaw.sin() * push).abs() < 0.01, "roll {roll}");
+    }
+
+    #[test]
     fn a_new_path_a_few_centimetres_aside_does_not_kick_the_sticks() {
         let config = DroneConfig::default();
         let mut drone = exploring_drone(Arc::default(), &config);
@@ -2123,7 +2182,10 @@ mod tests {
         drone.slam_fix(t, [0.5 * t, 0.0, 0.9], 0.0, None, false);
         drone.tick(t, &config);
         let s = drone.sticks.expect("sticks");
-        let p = config.gains.y.kp * 0.08;
+        // The proportional part of 8 cm, and the feed-forward's share across the path: it leans
+        // toward the carrot, 0.4 m ahead and 8 cm to the left.
+        let across = config.cruise_ff * config.follower.max_speed_mps * 0.08 / 0.4;
+        let p = config.gains.y.kp * 0.08 + across;
         assert!(
             s.roll < 0.0 && s.roll > -(p + 0.02) as f32,
             "a lean left of about {p}: {s:?}"
