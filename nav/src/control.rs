@@ -87,12 +87,8 @@ impl Pid {
         self.step(error, rate, dt, true)
     }
 
-    /// One update as [`Pid::update_with_rate`] that leaves the integral as it is: the loop
-    /// flies on what it has integrated so far without adding to it.
-    pub fn update_frozen(&mut self, error: f64, rate: f64, dt: f64) -> f64 {
-        self.step(error, rate, dt, false)
-    }
-
+    /// [`Pid::update_with_rate`], adding to the integral only if `integrate` (else the loop
+    /// flies on what it has integrated so far).
     fn step(&mut self, error: f64, rate: f64, dt: f64, integrate: bool) -> f64 {
         if !(error.is_finite() && dt.is_finite() && dt > 0.0) {
             return 0.0;
@@ -362,17 +358,9 @@ impl PositionController {
             self.reference.get_or_insert(now);
             self.recent = Some(now);
         }
-        let (ax, ay) = if self.integrating_xy {
-            (
-                self.x.update_with_rate(steer[0] - estimate.x, rate[0], dt),
-                self.y.update_with_rate(steer[1] - estimate.y, rate[1], dt),
-            )
-        } else {
-            (
-                self.x.update_frozen(steer[0] - estimate.x, rate[0], dt),
-                self.y.update_frozen(steer[1] - estimate.y, rate[1], dt),
-            )
-        };
+        let integrate = self.integrating_xy;
+        let ax = self.x.step(steer[0] - estimate.x, rate[0], dt, integrate);
+        let ay = self.y.step(steer[1] - estimate.y, rate[1], dt, integrate);
         let (s, c) = estimate.yaw.sin_cos();
         let forward = c * ax + s * ay;
         let left = -s * ax + c * ay;

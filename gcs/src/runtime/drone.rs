@@ -1388,6 +1388,7 @@ impl Drone {
         let lead = ahead[0].hypot(ahead[1]);
         let speed = self.speed_limit.min(config.follower.max_speed_mps);
         if cruise && lead > 1e-6 && speed.is_finite() {
+            // Toward the carrot (the steer point), in the body frame.
             let push = config.cruise_ff * speed / lead;
             let (s, co) = estimate.yaw.sin_cos();
             let (bx, by) = (ahead[0] * push, ahead[1] * push);
