@@ -264,6 +264,9 @@ pub struct DroneSummary {
     /// Frames the SLAM placed on features without depth (walls beyond the depth camera's range
     /// or nearer than its minimum), by projecting the map's points.
     pub projection_frames: usize,
+    /// Frames the SLAM registered on too few matches away from the motion so far or from the
+    /// move the drone's filter predicted: given a pose the drone was not flown on.
+    pub weak_frames: usize,
     /// Wall collisions.
     pub collisions: u32,
     /// Charged batteries it took off again on (`--battery-swap`).
@@ -784,6 +787,7 @@ fn watch(
                         .slam
                         .estimate(k)
                         .map_or(0, |e| e.projection_frames),
+                    weak_frames: perception.slam.estimate(k).map_or(0, |e| e.weak_frames),
                     collisions: collisions[k],
                     battery_swaps: report.drones[k].battery_swaps,
                     battery_left_pct: battery_left[k],
