@@ -602,9 +602,10 @@ fn a_drone_home_for_its_battery_gets_a_charged_one_and_rejoins_the_exploration()
 
 #[test]
 fn drones_whose_battery_runs_down_turn_home_in_time_over_either_link() {
-    // Three minutes of flight on a pack: the drones turn home when what is left would only just
-    // bring them back, read off the autopilot's charge over MAVLink and off the voltage over
-    // the shield, and land at their starts with more than the reserve left.
+    // Two minutes of flight on a pack (the two drones explore the apartment in about two): the
+    // drones turn home when what is left would only just bring them back, read off the
+    // autopilot's charge over MAVLink and off the voltage over the shield, and land at their
+    // starts with more than the reserve left and not much more than the way home's margin.
     for link in ["mavlink", "shield"] {
         let (summary, stderr, out) = explore(
             &format!("flight-time-{link}"),
@@ -618,7 +619,7 @@ fn drones_whose_battery_runs_down_turn_home_in_time_over_either_link() {
                 "--poses",
                 "truth",
                 "--flight-time",
-                "3",
+                "2",
                 "--no-log",
             ],
         );
