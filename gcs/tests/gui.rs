@@ -96,7 +96,7 @@ fn window_buttons_fly_the_simulated_fleet_and_show_a_lost_link() {
 
     // Waiting, both connected, on the ground.
     wait_for(&mut h, minute, "both links connected", |h| {
-        h.get_all_by_label("connected").count() == 2
+        h.query_all_by_label("connected").count() == 2
     });
     h.get_by_label("waiting for start");
     assert!(vehicles(&sitl).iter().all(|(armed, _)| !armed));
@@ -109,14 +109,14 @@ fn window_buttons_fly_the_simulated_fleet_and_show_a_lost_link() {
         vehicles(&sitl).iter().all(|&(armed, z)| armed && z > 0.5)
     });
     wait_for(&mut h, minute, "the panels to show both armed", |h| {
-        h.get_all_by_label("armed").count() == 2
+        h.query_all_by_label("armed").count() == 2
     });
 
     // Drone 2's link dies: shown at once (banner and card); its own failsafe will land it.
     sitl.kill_endpoint(1);
     wait_for(&mut h, minute, "the lost link on the panels", |h| {
         h.query_by_label("LINK LOST: drone 2").is_some()
-            && h.get_all_by_label("link lost").count() >= 2
+            && h.query_all_by_label("link lost").count() >= 2
     });
 
     // LAND ALL: drone 1 lands on the station's command, drone 2 by its failsafe.
