@@ -280,8 +280,8 @@ impl Default for DroneConfig {
                 // The simulated vehicle's battery failsafe lands it at 10 %.
                 reserve_pct: 15,
                 // Fitted to 30 returns (the apartment and building 31, 1 to 4 drones, true and
-                // SLAM poses, stop 69): 0.75 m/s and 7 s; the slowest took 0.92 times what
-                // this says, so the margin is what is spare.
+                // SLAM poses, stop 69): 0.76 m/s and 7.2 s; the slowest took 0.92 times what
+                // this says, so the 1.5 margin below is all to spare.
                 home_pace_mps: 0.6,
                 turn_and_land_s: 10.0,
                 home_margin: 1.5,
