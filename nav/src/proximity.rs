@@ -213,6 +213,9 @@ impl Proximity {
     /// the mean of the directions within the margin weighted by how far inside it they are,
     /// so a wall seen over many directions counts once and walls either side cancel.
     pub fn push(&self, now: f64, heading: f64, config: &ProximityConfig) -> [f64; 2] {
+        if !heading.is_finite() {
+            return [0.0; 2];
+        }
         let n = self.sectors.len() as f64;
         let (mut sum, mut count) = ([0.0; 2], 0usize);
         for (k, slot) in self.sectors.iter().enumerate() {
@@ -341,6 +344,9 @@ mod tests {
         let [forward, left] = p.push(0.5, FRAC_PI_2, &config);
         assert!(left > 0.02, "leans left: {left}");
         assert!(forward.abs() < 0.2 * left, "{forward}");
+        // A heading that is no number (a broken IMU report) leans nowhere rather than NaN.
+        assert_eq!(p.push(0.5, f64::NAN, &config), [0.0, 0.0]);
+        assert_eq!(p.push(0.5, f64::INFINITY, &config), [0.0, 0.0]);
     }
 
     #[test]
