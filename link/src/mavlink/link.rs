@@ -1002,8 +1002,10 @@ fn handle_frame(shared: &Shared, frame: &RawFrame, now: Instant) {
     };
     let t = &mut v.telemetry;
     // NED (x north, y east, z down) → map (x north/forward, y west/left, z up): a half turn about x.
+    // What is no number is dropped here (a broken sensor, a corrupt field): a NaN would
+    // otherwise reach every controller and the filter that read it.
     match msg {
-        MavMessage::ATTITUDE(a) => {
+        MavMessage::ATTITUDE(a) if [a.roll, a.pitch, a.yaw].iter().all(|v| v.is_finite()) => {
             let att = Attitude {
                 roll: a.roll,
                 pitch: -a.pitch,
@@ -1013,7 +1015,11 @@ fn handle_frame(shared: &Shared, frame: &RawFrame, now: Instant) {
             t.yaw_rad = Some(att.yaw);
             t.heading_at = Some(cfg.clock.now());
         }
-        MavMessage::LOCAL_POSITION_NED(p) => {
+        MavMessage::LOCAL_POSITION_NED(p)
+            if [p.x, p.y, p.z, p.vx, p.vy, p.vz]
+                .iter()
+                .all(|v| v.is_finite()) =>
+        {
             t.position_m = Some([p.x, -p.y, -p.z]);
             t.velocity_mps = Some([p.vx, -p.vy, -p.vz]);
         }
