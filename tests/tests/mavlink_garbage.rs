@@ -39,6 +39,16 @@ fn attitude(roll: f32, pitch: f32, yaw: f32) -> MavMessage {
     })
 }
 
+/// A status text: sent after other frames, its arrival shows they have been read (the link
+/// takes frames in order).
+fn text(text: &str) -> MavMessage {
+    MavMessage::STATUSTEXT(STATUSTEXT_DATA {
+        severity: MavSeverity::MAV_SEVERITY_INFO,
+        text: text.into(),
+        ..STATUSTEXT_DATA::default()
+    })
+}
+
 fn position(x: f32, vx: f32) -> MavMessage {
     MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {
         x,
@@ -71,10 +81,19 @@ fn attitude_and_position_that_are_no_numbers_are_dropped_and_the_last_good_ones_
         .wait_for_vehicle(5 * S)
         .expect("the heartbeat is heard");
 
+    let read = |marker: &str| {
+        eventually(5 * S, || {
+            vehicle.take_status_texts().iter().any(|s| s.text == marker)
+        })
+    };
     // Garbage first: nothing is taken.
     send(&mut stream, &mut seq, &attitude(0.1, 0.2, f32::NAN));
     send(&mut stream, &mut seq, &position(f32::INFINITY, 0.0));
-    // Then good values, which arrive (so the garbage before them was read and dropped)…
+    send(&mut stream, &mut seq, &text("first garbage sent"));
+    assert!(read("first garbage sent"));
+    let t = vehicle.telemetry();
+    assert_eq!((t.attitude, t.yaw_rad, t.position_m), (None, None, None));
+    // Then good values, which are taken…
     send(&mut stream, &mut seq, &attitude(0.1, 0.2, 0.5));
     send(&mut stream, &mut seq, &position(2.0, 0.5));
     assert!(eventually(5 * S, || {
@@ -84,17 +103,8 @@ fn attitude_and_position_that_are_no_numbers_are_dropped_and_the_last_good_ones_
     // …and garbage again, after which the good ones stand.
     send(&mut stream, &mut seq, &attitude(f32::NAN, 0.0, 0.0));
     send(&mut stream, &mut seq, &position(1.0, f32::NEG_INFINITY));
-    // A text after the garbage, to know it has been read: the link takes frames in order.
-    let after = MavMessage::STATUSTEXT(STATUSTEXT_DATA {
-        severity: MavSeverity::MAV_SEVERITY_INFO,
-        text: "after the garbage".into(),
-        ..STATUSTEXT_DATA::default()
-    });
-    send(&mut stream, &mut seq, &after);
-    assert!(eventually(5 * S, || vehicle
-        .take_status_texts()
-        .iter()
-        .any(|s| s.text == "after the garbage")));
+    send(&mut stream, &mut seq, &text("more garbage sent"));
+    assert!(read("more garbage sent"));
     let t = vehicle.telemetry();
     let a = t.attitude.expect("attitude");
     assert!(
