@@ -1,6 +1,6 @@
 //! A vehicle that sends numbers that are no numbers (NaN or infinite attitude and position, as
 //! a broken sensor or a corrupt field would): the MAVLink adapter keeps the last good values
-//! rather than hand NaN to the station's filter and controllers. The vehicle is a raw socket
+//! rather than hand NaN to the station's controllers, display and log. The vehicle is a raw socket
 //! writing MAVLink 2 frames, so it can send what no real autopilot library would.
 
 use std::io::Write;

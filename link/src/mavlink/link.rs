@@ -1003,7 +1003,7 @@ fn handle_frame(shared: &Shared, frame: &RawFrame, now: Instant) {
     let t = &mut v.telemetry;
     // NED (x north, y east, z down) → map (x north/forward, y west/left, z up): a half turn about x.
     // What is no number is dropped here (a broken sensor, a corrupt field): a NaN would
-    // otherwise reach every controller and the filter that read it.
+    // otherwise reach the sticks, the display and the log (the station's filter refuses it).
     match msg {
         MavMessage::ATTITUDE(a) if [a.roll, a.pitch, a.yaw].iter().all(|v| v.is_finite()) => {
             let att = Attitude {
