@@ -194,6 +194,49 @@ pub fn shared_turns(starts: &[Option<[f64; 3]>], together_m: f64, view: &View) -
     turns
 }
 
+/// The bearings the cameras of robots sharing one look around ([`shared_turns`]) have had in
+/// view between them, so that each ends its turn once every side has been seen by one of them.
+/// The map alone does not tell a robot that: each asks it from where it stands, and through a
+/// door or past a corner it shows unknown that the others' cameras have already faced (of four
+/// drones taking off together in the apartment, three turned 150° and the last 280°, about as
+/// long as one drone alone).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SharedLook {
+    seen: [bool; Self::BINS],
+    half_fov_rad: f64,
+}
+
+impl SharedLook {
+    /// Bearings are counted in this many equal sectors (5°: a turn at 36°/s and 10 Hz moves
+    /// the view by less than one).
+    pub const BINS: usize = 72;
+
+    /// A look around with nothing seen yet, by cameras that see as `view` says.
+    pub fn new(view: &View) -> Self {
+        Self {
+            seen: [false; Self::BINS],
+            half_fov_rad: view.half_fov_rad,
+        }
+    }
+
+    /// A camera of the group faces `heading` (radians, map frame): the sectors whose centre
+    /// lies in its view are seen. A heading that is no number sees nothing.
+    pub fn see(&mut self, heading: f64) {
+        if !heading.is_finite() {
+            return;
+        }
+        for (b, seen) in self.seen.iter_mut().enumerate() {
+            let off = (bearing_of(b, Self::BINS) - heading).rem_euclid(TAU);
+            *seen |= off <= self.half_fov_rad || off >= TAU - self.half_fov_rad;
+        }
+    }
+
+    /// Whether every side has been in some camera's view.
+    pub fn complete(&self) -> bool {
+        self.seen.iter().all(|&s| s)
+    }
+}
+
 /// At most this many robots share one look around ([`shared_turns`] tries every choice of ways
 /// among them; a larger group is cut into groups of this many).
 pub const MAX_SHARED: usize = 10;
@@ -214,8 +257,9 @@ pub fn shared_turn(headings: &[f64], ways: &[f64], view: &View) -> f64 {
 }
 
 /// The robots of `starts` (their indices) in groups whose members are linked by starts within
-/// `together_m` of one another; robots without a start are in none.
-fn groups(starts: &[Option<[f64; 3]>], together_m: f64) -> Vec<Vec<usize>> {
+/// `together_m` of one another; robots without a start are in none. These are the groups that
+/// share a look around ([`shared_turns`], [`SharedLook`]).
+pub fn groups(starts: &[Option<[f64; 3]>], together_m: f64) -> Vec<Vec<usize>> {
     let mut grouped = vec![false; starts.len()];
     let mut groups = vec![];
     for (k, start) in starts.iter().enumerate() {
@@ -270,6 +314,43 @@ mod tests {
             }
         }
         g
+    }
+
+    #[test]
+    fn a_shared_look_is_complete_once_the_cameras_have_faced_every_side_between_them() {
+        let view = View::default();
+        let mut look = SharedLook::new(&view);
+        assert!(!look.complete());
+        // Two cameras back to back see two sectors as wide as their view, and no more.
+        look.see(0.0);
+        look.see(PI);
+        look.see(f64::NAN);
+        assert!(!look.complete());
+        // One turning counter-clockwise from east and one from west, a quarter turn each (at
+        // 5° steps): the east-north and west-south quarters are seen, the rest is not yet.
+        for step in 0..=18 {
+            let a = f64::from(step) * 5f64.to_radians();
+            look.see(a);
+            look.see(PI + a);
+        }
+        assert!(
+            !look.complete(),
+            "a quarter turn each leaves two gaps of 90° - fov"
+        );
+        // Each gap closes once the camera before it has turned on by 90° - two half views.
+        let gap = PI / 2.0 - 2.0 * view.half_fov_rad;
+        let short = PI / 2.0 + gap - 0.1;
+        look.see(short);
+        look.see(PI + short);
+        assert!(
+            !look.complete(),
+            "{:.0}° short of closing the gaps",
+            0.1f64.to_degrees()
+        );
+        let past = PI / 2.0 + gap + 0.05;
+        look.see(past);
+        look.see(PI + past);
+        assert!(look.complete());
     }
 
     #[test]

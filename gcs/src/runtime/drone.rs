@@ -149,6 +149,8 @@ pub struct DroneConfig {
     /// ([`nav::sweep::shared_turns`]), metres; 0: each turns its own way (every bearing is
     /// unknown at the start, so all turned counter-clockwise, and the four drones of the
     /// apartment's hall, facing within 90° of one another, looked at the same walls for 7 s).
+    /// Their parts end once every side has been in one of their cameras' views
+    /// ([`nav::sweep::SharedLook`]).
     pub look_together_m: f64,
     /// A look around the SLAM loses the drone in goes on once it is found again, from the
     /// bearing where it was lost, while its losses add up to no more than this, seconds; a
@@ -401,6 +403,11 @@ struct Scan {
     lost_s: f64,
     /// [`DroneConfig::look_lost_s`].
     lost_max_s: f64,
+    /// Its part of a look around shared with the drones it took off beside
+    /// ([`Drone::share_first_look`]).
+    shared: bool,
+    /// ... and every side has been seen by one of them ([`Drone::shared_look_seen`]).
+    seen_by_all: bool,
 }
 
 impl Scan {
@@ -416,6 +423,8 @@ impl Scan {
             lost_since: None,
             lost_s: 0.0,
             lost_max_s: config.look_lost_s,
+            shared: false,
+            seen_by_all: false,
         }
     }
 
@@ -832,6 +841,24 @@ impl Drone {
     /// ([`nav::sweep::shared_turns`]). A later take-off (after a battery swap) looks its own way.
     pub fn share_first_look(&mut self, direction: f64) {
         self.first_look_turn = Some(direction.signum());
+    }
+
+    /// Its heading while it turns its part of a look around shared with the drones it took
+    /// off beside (the runtime adds up what their cameras have faced in a
+    /// [`nav::sweep::SharedLook`]); `None` at any other time.
+    pub fn shared_look_heading(&self) -> Option<f64> {
+        let scan = self.scan.filter(|s| s.shared)?;
+        (!scan.seen_by_all).then_some(())?;
+        self.pose().map(|p| p[3])
+    }
+
+    /// Every side has been in the view of one of the drones sharing its first look around: its
+    /// part ends (after [`DroneConfig::scan_min_s`], like any look), whatever the map still
+    /// shows unknown from where it stands.
+    pub fn shared_look_seen(&mut self) {
+        if let Some(scan) = self.scan.as_mut().filter(|s| s.shared) {
+            scan.seen_by_all = true;
+        }
     }
 
     /// A new frontier goal and path from the mission planner (exploring drones only), and the
@@ -1326,6 +1353,7 @@ impl Drone {
                     let mut scan = self.look_around(now, pose, None, config);
                     if let Some(turn) = self.first_look_turn.take() {
                         scan.direction = turn;
+                        scan.shared = true;
                     }
                     self.scan = Some(scan);
                     self.progress = (now, here);
@@ -1635,7 +1663,8 @@ impl Drone {
             // whole one, then the goal (if any) is given up.
             let t = now - scan.since;
             let swept = t * std::f64::consts::TAU / config.scan_s;
-            let more = t < config.scan_min_s || self.unknown_ahead(here, &scan, swept, config);
+            let more = t < config.scan_min_s
+                || (!scan.seen_by_all && self.unknown_ahead(here, &scan, swept, config));
             if t < config.scan_s && !scan.cut && more {
                 self.yaw_goal = scan.yaw0 + scan.direction * swept;
                 self.progress = (now, here);
@@ -2879,6 +2908,54 @@ mod tests {
         // Its share was of the first look around: taking off again later, it looks its own way.
         beside.scan = None;
         assert!(turned_after_takeoff(&mut beside, 10.0) > 0.5);
+    }
+
+    #[test]
+    fn a_shared_first_look_ends_once_the_drones_sharing_it_have_seen_every_side() {
+        let config = DroneConfig::default();
+        // Airborne at (0, 0) with no map (to itself, unknown all round): it would turn on until
+        // the whole turn is done. Ticks from `t0` for `seconds`; whether it still looks.
+        let fly = |drone: &mut Drone, t0: f64, seconds: f64| {
+            let mut t = t0;
+            while t < t0 + seconds {
+                drone.slam_fix(t, [0.0, 0.0, 0.9], drone.yaw_goal, None, false);
+                drone.tick(t, &config);
+                t += 0.1;
+            }
+            drone.scan.is_some()
+        };
+        let mut alone = exploring_drone(Arc::default(), &config);
+        alone.phase = Phase::TakingOff;
+        assert!(fly(&mut alone, 0.0, 0.5));
+        assert_eq!(alone.shared_look_heading(), None, "its look is its own");
+        alone.shared_look_seen();
+        assert!(fly(&mut alone, 0.5, config.scan_min_s + 1.0), "and goes on");
+
+        let mut beside = exploring_drone(Arc::default(), &config);
+        beside.share_first_look(1.0);
+        beside.phase = Phase::TakingOff;
+        assert!(fly(&mut beside, 0.0, 0.5));
+        let heading = beside.shared_look_heading().expect("its share's heading");
+        assert!((heading - beside.pose().expect("a pose")[3]).abs() < 1e-9);
+        assert!(
+            fly(&mut beside, 0.5, config.scan_min_s + 1.0),
+            "on while sides are unseen"
+        );
+        // Every side seen between them: it ends its part now, and tells no more headings.
+        beside.shared_look_seen();
+        assert_eq!(beside.shared_look_heading(), None);
+        assert!(!fly(&mut beside, 3.5, 0.2), "over");
+        // Told so before its minimum was up, it still turns for the minimum.
+        let mut early = exploring_drone(Arc::default(), &config);
+        early.share_first_look(1.0);
+        early.phase = Phase::TakingOff;
+        assert!(fly(&mut early, 0.0, 0.5));
+        early.shared_look_seen();
+        assert!(
+            fly(&mut early, 0.5, config.scan_min_s - 1.0),
+            "the map lags the camera"
+        );
+        assert!(!fly(&mut early, config.scan_min_s - 0.5, 1.0));
     }
 
     #[test]

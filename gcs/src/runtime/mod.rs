@@ -346,15 +346,22 @@ impl Runtime {
             .enumerate()
             .map(|(k, spec)| Drone::new(k, spec, &config.drone, t0))
             .collect();
+        let mut first_looks = vec![];
         if let Some(view) = config.drone.sweep {
             // Drones that take off beside one another share their first look around.
             let starts: Vec<Option<[f64; 3]>> = drones.iter().map(|d| d.start).collect();
-            let turns = nav::sweep::shared_turns(&starts, config.drone.look_together_m, &view);
+            let together = config.drone.look_together_m;
+            let turns = nav::sweep::shared_turns(&starts, together, &view);
             for (drone, turn) in drones.iter_mut().zip(turns) {
                 if let Some(turn) = turn {
                     drone.share_first_look(turn);
                 }
             }
+            first_looks = nav::sweep::groups(&starts, together)
+                .into_iter()
+                .filter(|g| g.len() > 1)
+                .map(|g| (g, nav::sweep::SharedLook::new(&view)))
+                .collect();
         }
         let (commands, rx) = channel();
         let first = Snapshot {
@@ -391,6 +398,7 @@ impl Runtime {
             planner,
             planner_lost: false,
             stall: Stall::default(),
+            first_looks,
         };
         let thread = {
             let done = done.clone();
@@ -494,6 +502,9 @@ struct Mission {
     planner_lost: bool,
     /// Plans that give no drone a goal while something is left.
     stall: Stall,
+    /// The drones taking off beside one another (indices) and what their shared first look
+    /// around has seen so far.
+    first_looks: Vec<(Vec<usize>, nav::sweep::SharedLook)>,
 }
 
 impl Mission {
@@ -717,6 +728,7 @@ impl Mission {
     }
 
     fn control(&mut self, now: f64) {
+        self.share_first_looks();
         for k in 0..self.drones.len() {
             if self.state == MissionState::Exploring
                 && self.drones[k].rejoin_after_swap(now, &self.config.drone)
@@ -806,6 +818,24 @@ impl Mission {
         {
             self.say(now, format!("timeout after {limit:.0} s: landing"));
             self.finish(Outcome::TimedOut);
+        }
+    }
+
+    /// Adds what the cameras of drones sharing a first look around face now to what they have
+    /// seen, and ends their parts once every side has been seen (a drone still taking off then
+    /// turns only the shortest look).
+    fn share_first_looks(&mut self) {
+        for (members, look) in &mut self.first_looks {
+            for &k in members.iter() {
+                if let Some(heading) = self.drones[k].shared_look_heading() {
+                    look.see(heading);
+                }
+            }
+            if look.complete() {
+                for &k in members.iter() {
+                    self.drones[k].shared_look_seen();
+                }
+            }
         }
     }
 
