@@ -847,8 +847,7 @@ impl Drone {
     /// off beside (the runtime adds up what their cameras have faced in a
     /// [`nav::sweep::SharedLook`]); `None` at any other time.
     pub fn shared_look_heading(&self) -> Option<f64> {
-        let scan = self.scan.filter(|s| s.shared)?;
-        (!scan.seen_by_all).then_some(())?;
+        self.scan.filter(|s| s.shared && !s.seen_by_all)?;
         self.pose().map(|p| p[3])
     }
 
