@@ -203,7 +203,14 @@ pub fn shared_turns(starts: &[Option<[f64; 3]>], together_m: f64, view: &View) -
 #[derive(Debug, Clone, PartialEq)]
 pub struct SharedLook {
     seen: [bool; Self::BINS],
-    half_fov_rad: f64,
+}
+
+impl Default for SharedLook {
+    fn default() -> Self {
+        Self {
+            seen: [false; Self::BINS],
+        }
+    }
 }
 
 impl SharedLook {
@@ -211,23 +218,22 @@ impl SharedLook {
     /// the view by less than one).
     pub const BINS: usize = 72;
 
-    /// A look around with nothing seen yet, by cameras that see as `view` says.
-    pub fn new(view: &View) -> Self {
-        Self {
-            seen: [false; Self::BINS],
-            half_fov_rad: view.half_fov_rad,
-        }
+    /// A look around with nothing seen yet.
+    pub fn new() -> Self {
+        Self::default()
     }
 
-    /// A camera of the group faces `heading` (radians, map frame): the sectors whose centre
-    /// lies in its view are seen. A heading that is no number sees nothing.
-    pub fn see(&mut self, heading: f64) {
+    /// A camera of the group faces `heading` (radians, map frame) and sees as `view` says (its
+    /// own camera's field of view): the sectors whose centre lies in its view are seen. A
+    /// heading that is no number sees nothing.
+    pub fn see(&mut self, heading: f64, view: &View) {
         if !heading.is_finite() {
             return;
         }
+        let half = view.half_fov_rad;
         for (b, seen) in self.seen.iter_mut().enumerate() {
             let off = (bearing_of(b, Self::BINS) - heading).rem_euclid(TAU);
-            *seen |= off <= self.half_fov_rad || off >= TAU - self.half_fov_rad;
+            *seen |= off <= half || off >= TAU - half;
         }
     }
 
@@ -319,19 +325,19 @@ mod tests {
     #[test]
     fn a_shared_look_is_complete_once_the_cameras_have_faced_every_side_between_them() {
         let view = View::default();
-        let mut look = SharedLook::new(&view);
+        let mut look = SharedLook::new();
         assert!(!look.complete());
         // Two cameras back to back see two sectors as wide as their view, and no more.
-        look.see(0.0);
-        look.see(PI);
-        look.see(f64::NAN);
+        look.see(0.0, &view);
+        look.see(PI, &view);
+        look.see(f64::NAN, &view);
         assert!(!look.complete());
         // One turning counter-clockwise from east and one from west, a quarter turn each (at
         // 5° steps): the east-north and west-south quarters are seen, the rest is not yet.
         for step in 0..=18 {
             let a = f64::from(step) * 5f64.to_radians();
-            look.see(a);
-            look.see(PI + a);
+            look.see(a, &view);
+            look.see(PI + a, &view);
         }
         assert!(
             !look.complete(),
@@ -340,16 +346,16 @@ mod tests {
         // Each gap closes once the camera before it has turned on by 90° - two half views.
         let gap = PI / 2.0 - 2.0 * view.half_fov_rad;
         let short = PI / 2.0 + gap - 0.1;
-        look.see(short);
-        look.see(PI + short);
+        look.see(short, &view);
+        look.see(PI + short, &view);
         assert!(
             !look.complete(),
             "{:.0}° short of closing the gaps",
             0.1f64.to_degrees()
         );
         let past = PI / 2.0 + gap + 0.05;
-        look.see(past);
-        look.see(PI + past);
+        look.see(past, &view);
+        look.see(PI + past, &view);
         assert!(look.complete());
     }
 

@@ -843,12 +843,12 @@ impl Drone {
         self.first_look_turn = Some(direction.signum());
     }
 
-    /// Its heading while it turns its part of a look around shared with the drones it took
-    /// off beside (the runtime adds up what their cameras have faced in a
-    /// [`nav::sweep::SharedLook`]); `None` at any other time.
-    pub fn shared_look_heading(&self) -> Option<f64> {
+    /// Its heading, and what its camera sees, while it turns its part of a look around shared
+    /// with the drones it took off beside (the runtime adds up what their cameras have faced in
+    /// a [`nav::sweep::SharedLook`]); `None` at any other time, or with sweeps off.
+    pub fn shared_look_view(&self, config: &DroneConfig) -> Option<(f64, View)> {
         self.scan.filter(|s| s.shared && !s.seen_by_all)?;
-        self.pose().map(|p| p[3])
+        Some((self.pose()?[3], self.view(config)?))
     }
 
     /// Every side has been in the view of one of the drones sharing its first look around: its
@@ -2926,7 +2926,7 @@ mod tests {
         let mut alone = exploring_drone(Arc::default(), &config);
         alone.phase = Phase::TakingOff;
         assert!(fly(&mut alone, 0.0, 0.5));
-        assert_eq!(alone.shared_look_heading(), None, "its look is its own");
+        assert_eq!(alone.shared_look_view(&config), None, "its look is its own");
         alone.shared_look_seen();
         assert!(fly(&mut alone, 0.5, config.scan_min_s + 1.0), "and goes on");
 
@@ -2934,15 +2934,16 @@ mod tests {
         beside.share_first_look(1.0);
         beside.phase = Phase::TakingOff;
         assert!(fly(&mut beside, 0.0, 0.5));
-        let heading = beside.shared_look_heading().expect("its share's heading");
+        let (heading, view) = beside.shared_look_view(&config).expect("its share's view");
         assert!((heading - beside.pose().expect("a pose")[3]).abs() < 1e-9);
+        assert_eq!(Some(view), beside.view(&config));
         assert!(
             fly(&mut beside, 0.5, config.scan_min_s + 1.0),
             "on while sides are unseen"
         );
         // Every side seen between them: it ends its part now, and tells no more headings.
         beside.shared_look_seen();
-        assert_eq!(beside.shared_look_heading(), None);
+        assert_eq!(beside.shared_look_view(&config), None);
         assert!(!fly(&mut beside, 3.5, 0.2), "over");
         // Told so before its minimum was up, it still turns for the minimum.
         let mut early = exploring_drone(Arc::default(), &config);

@@ -360,7 +360,7 @@ impl Runtime {
             first_looks = nav::sweep::groups(&starts, together)
                 .into_iter()
                 .filter(|g| g.len() > 1)
-                .map(|g| (g, nav::sweep::SharedLook::new(&view)))
+                .map(|g| (g, nav::sweep::SharedLook::new()))
                 .collect();
         }
         let (commands, rx) = channel();
@@ -827,8 +827,8 @@ impl Mission {
     fn share_first_looks(&mut self) {
         for (members, look) in &mut self.first_looks {
             for &k in members.iter() {
-                if let Some(heading) = self.drones[k].shared_look_heading() {
-                    look.see(heading);
+                if let Some((heading, view)) = self.drones[k].shared_look_view(&self.config.drone) {
+                    look.see(heading, &view);
                 }
             }
             if look.complete() {
