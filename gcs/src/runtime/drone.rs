@@ -252,9 +252,9 @@ impl Default for DroneConfig {
                 lookahead_m: 0.4,
                 // Paths lie in known free space, so a bend of up to 90° is flown while the
                 // drone turns to it; only a sharper one is turned to on the spot first, and
-                // that turn's last 60° are flown as a bend is (one drone on true poses, 24
-                // seeds paired: 9.0 s shorter missions, t = −2.35; the main command on SLAM
-                // poses: `docs/benchmarks.md`, stop 72).
+                // that turn's last 60° are flown as a bend is (paired: one drone on true
+                // poses 8.6 s shorter over 48 seeds, the main command on SLAM poses 12.5 s
+                // over 24 with fewer collisions; `docs/benchmarks.md`, stop 72).
                 turn_threshold_rad: 90f64.to_radians(),
                 resume_threshold_rad: 60f64.to_radians(),
                 ..FollowerConfig::default()
