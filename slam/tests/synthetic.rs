@@ -661,39 +661,47 @@ fn on_a_vehicle_a_weak_registration_away_from_the_motion_is_not_to_be_flown_on()
     assert!(lenient.tracked[0] * 10 >= lenient.frames[0] * 9);
 }
 
+/// One drone, `setup` then flown 0.8 m forward and held 2 s, every registration counted as one
+/// on too few inliers and the motion so far allowed any error: what decides whether one is
+/// built on is the vehicle alone.
+fn few_inliers_forward(name: &str, setup: impl FnOnce(&mut Flight)) -> Flight {
+    let mut f = Flight::new(
+        1,
+        &[true],
+        SlamConfig {
+            keyframe_min_inliers: usize::MAX,
+            weak_agreement: (1.0, 1.0),
+            ..SlamConfig::default()
+        },
+    );
+    setup(&mut f);
+    let (x, y, yaw) = start_of(&f, 0);
+    let ahead = [x + 0.8 * yaw.cos(), y + 0.8 * yaw.sin(), 1.0, yaw];
+    f.fly(&[vec![[x, y, 1.0, yaw], ahead]], 15.0);
+    f.hold(&[ahead], 2.0);
+    eprintln!(
+        "{name}: {} frames, {} tracked, {} weak, {} lost, {} keyframes",
+        f.frames[0],
+        f.tracked[0],
+        f.weak[0],
+        f.lost[0],
+        f.slam.stats().keyframes
+    );
+    f
+}
+
 #[test]
 fn on_a_vehicle_a_weak_registration_away_from_its_own_predicted_move_is_not_built_on() {
-    // Flying forward and hovering, every registration counted as one on too few inliers and
-    // the motion so far allowed any error: the vehicle's own prediction is then the only
-    // check. Told the truth, it passes every registration; predicting a slide of 0.3 m/s that
+    // Flying forward and hovering, every registration counted as one on too few inliers
+    // (`few_inliers_forward`): the vehicle's own prediction is then the only check. Told the truth, it passes every registration; predicting a slide of 0.3 m/s that
     // is not there, it makes the registrations weak once they are 0.1 m from its move, and
     // nothing more is built on them (a bare wall's registration slides with the prediction it
     // starts from, so only the vehicle can tell).
     let run = |drift_mps: f64| {
-        let mut f = Flight::new(
-            1,
-            &[true],
-            SlamConfig {
-                keyframe_min_inliers: usize::MAX,
-                weak_agreement: (1.0, 1.0),
-                ..SlamConfig::default()
-            },
-        );
-        f.predicted_height_error = Some(0.0);
-        f.predicted_x_drift_mps = drift_mps;
-        let (x, y, yaw) = start_of(&f, 0);
-        let ahead = [x + 0.8 * yaw.cos(), y + 0.8 * yaw.sin(), 1.0, yaw];
-        f.fly(&[vec![[x, y, 1.0, yaw], ahead]], 15.0);
-        f.hold(&[ahead], 2.0);
-        eprintln!(
-            "drift {drift_mps} m/s: {} frames, {} tracked, {} weak, {} lost, {} keyframes",
-            f.frames[0],
-            f.tracked[0],
-            f.weak[0],
-            f.lost[0],
-            f.slam.stats().keyframes
-        );
-        f
+        few_inliers_forward(&format!("drift {drift_mps} m/s"), |f| {
+            f.predicted_height_error = Some(0.0);
+            f.predicted_x_drift_mps = drift_mps;
+        })
     };
     let honest = run(0.0);
     assert_eq!(honest.weak[0], 0);
@@ -710,6 +718,39 @@ fn on_a_vehicle_a_weak_registration_away_from_its_own_predicted_move_is_not_buil
     assert!(drifting.slam.stats().keyframes * 2 <= honest_keyframes);
     let counted = drifting.slam.estimate(0).map_or(0, |e| e.weak_frames);
     assert_eq!(counted, drifting.weak[0]);
+}
+
+#[test]
+fn on_a_vehicle_whose_filter_predicts_nothing_a_registration_on_few_inliers_is_not_built_on() {
+    // Flying forward and hovering with an IMU but no prediction (its filter has given up, too
+    // long without a pose to fly on), every registration counted as one on too few inliers:
+    // nothing can check them against the vehicle's move, so none is built on. A hand-held
+    // camera (no IMU) builds on every one.
+    let run = |imu: bool| {
+        few_inliers_forward(&format!("imu {imu}"), |f| {
+            if !imu {
+                f.heading_bias = None;
+            }
+        })
+    };
+    let vehicle = run(true);
+    assert_eq!(vehicle.tracked[0], 0, "a registration built on");
+    assert!(
+        vehicle.weak[0] * 10 >= vehicle.frames[0] * 8,
+        "{} of {} weak",
+        vehicle.weak[0],
+        vehicle.frames[0]
+    );
+    let hand_held = run(false);
+    assert_eq!(hand_held.weak[0], 0);
+    assert!(hand_held.tracked[0] * 10 >= hand_held.frames[0] * 8);
+    let keyframes = |f: &Flight| f.slam.stats().keyframes;
+    assert!(
+        keyframes(&vehicle) * 2 <= keyframes(&hand_held),
+        "{} keyframes on the vehicle, {} hand-held",
+        keyframes(&vehicle),
+        keyframes(&hand_held)
+    );
 }
 
 /// `good` (a flight whose sensors tell the truth) lost at most 1 frame in 20; `off` (the same
