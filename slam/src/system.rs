@@ -1512,11 +1512,11 @@ impl Slam {
         let pose = self.nodes[anchor].pose * anchor_from_camera;
         r.projection_frames += usize::from(reg.without_depth > 0);
         // On a vehicle (a caller that predicts the body, i.e. has a filter to fly on between
-        // fixes, or a robot with an IMU), a weak registration that disagrees with the motion so far gives this frame its
-        // pose but nothing to build on: it becomes neither the next frame's reference nor a
-        // keyframe, nor the motion the next frame is predicted with (a fit on a dozen inliers
-        // can be degrees off, and a keyframe would keep that error in the map for good). One
-        // that agrees carries tracking through a bare stretch. A hand-held camera moves in jerks
+        // fixes, or a robot with an IMU), a weak registration that disagrees with the motion so
+        // far gives this frame its pose but nothing to build on: it becomes neither the next
+        // frame's reference nor a keyframe, nor the motion the next frame is predicted with (a
+        // fit on a dozen inliers can be degrees off, and a keyframe would keep that error in
+        // the map for good). One that agrees carries tracking through a bare stretch. A hand-held camera moves in jerks
         // that no constant-velocity model follows; there every registration is built on. The
         // next frame is still predicted from the weak pose: tried from where the motion before
         // it carried the camera instead, drones were lost two to three times as often (stop
