@@ -1155,7 +1155,7 @@ impl Drone {
         }
         if self.lost_since.is_none() {
             self.lost_since = Some(stamp);
-            self.sweep_back = self.recent_turn.turned() < -config.blind_sweep_back_rad;
+            self.choose_sweep(config);
         }
         if self.lost_at.is_some() {
             return;
@@ -1572,7 +1572,7 @@ impl Drone {
     ) -> Option<DroneEvent> {
         // Blind since the SLAM lost it, if it flew on visual odometry in between.
         if self.blind_since.is_none() && self.lost_since.is_none() {
-            self.sweep_back = self.recent_turn.turned() < -config.blind_sweep_back_rad;
+            self.choose_sweep(config);
         }
         let since = *self
             .blind_since
@@ -1639,6 +1639,12 @@ impl Drone {
             yaw,
         });
         None
+    }
+
+    /// At a loss (or going blind), which way its sweep will turn: back counter-clockwise if it
+    /// was turning clockwise ([`DroneConfig::blind_sweep_back_rad`]).
+    fn choose_sweep(&mut self, config: &DroneConfig) {
+        self.sweep_back = self.recent_turn.turned() < -config.blind_sweep_back_rad;
     }
 
     /// The yaw stick of a lost drone's slow sweep: [`DroneConfig::blind_yaw`], counter-clockwise
