@@ -434,6 +434,68 @@ fn two_drones_map_all_of_a_real_house_through_its_doors() {
 }
 
 #[test]
+fn an_end_with_frontiers_out_of_reach_waits_for_the_map_to_settle_before_landing() {
+    // Two rooms 3 m square; the drones start in the west one and see into the east one
+    // through a slit 0.4 m wide, too narrow to fly: its frontiers stay out of reach.
+    let dir = std::env::temp_dir().join(format!("gcs-slit-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("a temporary directory");
+    let world = dir.join("slit.txt");
+    let mut rows = vec!["#".repeat(33)];
+    for y in 1..16 {
+        let mut row: Vec<char> = "#...............#...............#".chars().collect();
+        if y == 8 || y == 9 {
+            row[16] = '.';
+        }
+        if y == 12 {
+            (row[4], row[8]) = ('1', '2');
+        }
+        rows.push(row.into_iter().collect());
+    }
+    rows.push("#".repeat(33));
+    std::fs::write(
+        &world,
+        format!("resolution 0.2\nceiling 2.6\n---\n{}\n", rows.join("\n")),
+    )
+    .expect("the world file");
+    let (summary, stderr, out) = explore(
+        "slit",
+        &[
+            "--world",
+            world.to_str().expect("utf-8 path"),
+            "--poses",
+            "truth",
+            "--speed",
+            "10",
+            "--timeout",
+            "200",
+            "--no-log",
+        ],
+    );
+    assert_eq!(summary["outcome"], "completed", "{summary}");
+    assert!(
+        number(&summary["frontiers_out_of_reach"]) >= 1.0,
+        "{summary}"
+    );
+    assert_eq!(summary["all_landed"], true, "{summary}");
+    // "no reachable frontier left after T s": first to hover, then, 5 s on, to land.
+    let after = |tail: &str| {
+        stderr
+            .lines()
+            .filter(|l| l.contains(tail))
+            .find_map(|l| {
+                let (_, rest) = l.split_once("no reachable frontier left after ")?;
+                rest.split_once(" s")?.0.parse::<f64>().ok()
+            })
+            .unwrap_or_else(|| panic!("no \"{tail}\" in {stderr}"))
+    };
+    let hovered = after("for the map to settle before landing");
+    let landed = after("): landing");
+    assert!(landed - hovered >= 4.0, "{hovered} s, {landed} s");
+    std::fs::remove_dir_all(&out).ok();
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
 fn a_drone_whose_link_dies_is_landed_by_its_failsafe_and_the_other_finishes_the_map() {
     let (summary, stderr, out) = explore(
         "kill",
