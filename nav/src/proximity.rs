@@ -14,8 +14,12 @@
 //! a pose, [`map_readings`] ranges the map's walls all round it, so the moment it goes blind
 //! the memory already holds the walls behind it.
 //!
-//! A depth camera measures nothing nearer than its minimum range (0.4 m for a Kinect): a
-//! direction that was near and now shows nothing is taken to be nearer still, not clear.
+//! A depth camera measures nothing nearer than its minimum range (0.4 m for a Kinect). A
+//! direction that shows no wall is open only if the camera still measured something there: the
+//! floor or the ceiling, which it sees in every unblocked direction from about two drone
+//! heights on. One where it measured nothing at all is blocked by a wall too near to range
+//! ([`Sight::Blocked`]). A drone drifting backward to a wall and then turning to face it sees
+//! only that, and before this was told apart from an opening it was taken as clear.
 
 use crate::Grid;
 use crate::avoid::walls_near;
@@ -39,9 +43,10 @@ pub struct ProximityConfig {
     pub gain: f64,
     /// …up to this much stick.
     pub max: f64,
-    /// A direction ranged nearer than this that then shows nothing is taken as too near to
-    /// measure (the camera's minimum range plus a little), metres.
-    pub near_m: f64,
+    /// A blocked direction ([`Sight::Blocked`]) is taken to have a wall this far from the
+    /// drone's centre, metres, unless one was ranged nearer: between touching (the drone's
+    /// radius) and the camera's minimum range seen from the centre.
+    pub blocked_m: f64,
     /// [`map_readings`] range the map's walls this far, metres.
     pub map_reach_m: f64,
 }
@@ -60,7 +65,8 @@ impl Default for ProximityConfig {
             margin_m: 0.6,
             gain: 0.25,
             max: 0.1,
-            near_m: 0.7,
+            // Touching at 0.2 m; a Kinect 0.1 m ahead of the centre ranges from 0.5 m.
+            blocked_m: 0.35,
             map_reach_m: 1.0,
         }
     }
@@ -71,15 +77,38 @@ impl Default for ProximityConfig {
 pub struct Reading {
     /// The direction in the body frame, radians (0 ahead, counter-clockwise positive).
     pub bearing_rad: f64,
-    /// Horizontal distance from the body's centre, metres; `None`: nothing measured that way.
-    pub range_m: Option<f64>,
+    /// What lies that way.
+    pub sight: Sight,
+}
+
+/// What a camera frame (or the map) shows in one direction.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Sight {
+    /// A wall, this far from the body's centre (horizontally), metres.
+    Wall(f64),
+    /// No wall within range, but the camera measured the floor or the ceiling that way.
+    Open,
+    /// Nothing measured at all, not even the floor: a wall nearer than the camera ranges fills
+    /// its view that way.
+    Blocked,
+}
+
+impl Sight {
+    /// The wall's range, metres, if a wall was ranged.
+    pub fn range_m(self) -> Option<f64> {
+        match self {
+            Sight::Wall(m) => Some(m),
+            Sight::Open | Sight::Blocked => None,
+        }
+    }
 }
 
 /// The nearest wall in each direction of one camera frame, from its points in the body frame
-/// (x forward, y left, z up, metres) and the camera's horizontal field of view
-/// `[right, left]` edge bearings (radians): every direction in view gets a reading, with no
-/// range where no point of the band lies. The third-nearest point of a direction counts, so
-/// a stray pixel does not.
+/// (x forward, y left, z up, metres; every pixel with a depth, floor and ceiling included) and
+/// the camera's horizontal field of view `[right, left]` edge bearings (radians): every
+/// direction in view gets a reading. The third-nearest point of the band counts as the wall,
+/// so a stray pixel does not; a direction with no wall is [`Sight::Open`] if it has three
+/// points at any height, else [`Sight::Blocked`].
 pub fn readings(
     points_in_body: impl IntoIterator<Item = [f64; 3]>,
     fov_rad: [f64; 2],
@@ -91,15 +120,20 @@ pub fn readings(
         return vec![];
     }
     let bins = ((left - right) / step).ceil().min(360.0) as usize;
-    // The three nearest ranges of each direction, nearest first.
+    // The three nearest ranges of each direction, nearest first, and how many points it has.
     let mut nearest = vec![[f64::INFINITY; 3]; bins];
+    let mut measured = vec![0usize; bins];
     for [x, y, z] in points_in_body {
-        if !(x.is_finite() && y.is_finite() && z.abs() <= config.band_m) {
+        if !(x.is_finite() && y.is_finite() && z.is_finite()) {
             continue;
         }
         let bearing = y.atan2(x);
         let i = ((bearing - right) / step).floor();
         if !(0.0..bins as f64).contains(&i) {
+            continue;
+        }
+        measured[i as usize] += 1;
+        if z.abs() > config.band_m {
             continue;
         }
         let three = &mut nearest[i as usize];
@@ -111,10 +145,17 @@ pub fn readings(
     }
     nearest
         .iter()
+        .zip(measured)
         .enumerate()
-        .map(|(i, three)| Reading {
+        .map(|(i, (three, measured))| Reading {
             bearing_rad: right + (i as f64 + 0.5) * step,
-            range_m: three[2].is_finite().then_some(three[2]),
+            sight: if three[2].is_finite() {
+                Sight::Wall(three[2])
+            } else if measured >= 3 {
+                Sight::Open
+            } else {
+                Sight::Blocked
+            },
         })
         .collect()
 }
@@ -145,7 +186,7 @@ pub fn map_readings(
         .enumerate()
         .map(|(i, range)| Reading {
             bearing_rad: -PI + (i as f64 + 0.5) * step,
-            range_m: Some(range),
+            sight: Sight::Wall(range),
         })
         .collect()
 }
@@ -185,11 +226,19 @@ impl Proximity {
         if !(stamp.is_finite() && heading.is_finite()) {
             return;
         }
-        // A frame's directions are finer than the sectors: the nearest of each sector's.
+        // A frame's directions are finer than the sectors: the nearest wall of each sector's
+        // (`None` while only open directions fell in it).
         let mut seen: Vec<Option<Option<f64>>> = vec![None; self.sectors.len()];
         for r in readings {
             let k = self.sector(heading + r.bearing_rad);
-            let range = r.range_m.filter(|m| m.is_finite());
+            let range = match r.sight {
+                Sight::Wall(m) => Some(m).filter(|m| m.is_finite()),
+                Sight::Open => None,
+                // Too near to range: nearer than it was ranged last, if that was nearer still.
+                Sight::Blocked => {
+                    Some(self.sectors[k].map_or(config.blocked_m, |(m, _)| m.min(config.blocked_m)))
+                }
+            };
             seen[k] = Some(match (seen[k].flatten(), range) {
                 (Some(a), Some(b)) => Some(a.min(b)),
                 (a, b) => a.or(b),
@@ -199,11 +248,7 @@ impl Proximity {
             match seen {
                 None => {}
                 Some(Some(range)) => *slot = Some((range, stamp)),
-                // Near before and nothing now: nearer than the camera measures.
-                Some(None) => match *slot {
-                    Some((range, _)) if range < config.near_m => *slot = Some((range, stamp)),
-                    _ => *slot = None,
-                },
+                Some(None) => *slot = None,
             }
         }
     }
@@ -278,7 +323,10 @@ mod tests {
         let r = readings(wall_ahead(1.0), FOV, &config);
         assert_eq!(r.len(), 13);
         for reading in &r {
-            let range = reading.range_m.expect("every direction sees the wall");
+            let range = reading
+                .sight
+                .range_m()
+                .expect("every direction sees the wall");
             // Flat wall: range ≈ 1 / cos(bearing), within a bin's width.
             let expected = 1.0 / reading.bearing_rad.cos();
             assert!((range - expected).abs() < 0.03, "{reading:?}");
@@ -288,12 +336,13 @@ mod tests {
     #[test]
     fn floor_ceiling_and_stray_points_are_not_walls() {
         let config = ProximityConfig::default();
-        // Only floor and ceiling points, near: nothing read.
+        // Only floor and ceiling points, near: no wall read; open where they lie, ahead.
         let floor = (0..100).map(|i| [0.3 + f64::from(i) * 0.01, 0.0, -0.9]);
+        let r = readings(floor, FOV, &config);
+        assert!(r.iter().all(|r| r.sight.range_m().is_none()));
         assert!(
-            readings(floor, FOV, &config)
-                .iter()
-                .all(|r| r.range_m.is_none())
+            r.iter()
+                .any(|r| r.bearing_rad.abs() < 0.05 && r.sight == Sight::Open)
         );
         // Two stray pixels at 0.2 m in front of a wall at 2 m: the wall is read.
         let mut points = wall_ahead(2.0);
@@ -304,14 +353,14 @@ mod tests {
             .find(|r| r.bearing_rad.abs() < 0.05)
             .expect("a direction ahead");
         assert!(
-            (ahead.range_m.expect("range") - 2.0).abs() < 0.01,
+            (ahead.sight.range_m().expect("range") - 2.0).abs() < 0.01,
             "{ahead:?}"
         );
         // Garbage field of view or points: nothing, no panic.
         assert!(readings(wall_ahead(1.0), [0.5, -0.5], &config).is_empty());
         assert!(readings(wall_ahead(1.0), [f64::NAN, 0.5], &config).is_empty());
         let nan = readings([[f64::NAN, 0.0, 0.0]], FOV, &config);
-        assert!(nan.iter().all(|r| r.range_m.is_none()));
+        assert!(nan.iter().all(|r| r.sight == Sight::Blocked));
     }
 
     #[test]
@@ -397,14 +446,14 @@ mod tests {
         let behind = r
             .iter()
             .filter(|r| r.bearing_rad.abs() > PI - 0.05)
-            .filter_map(|r| r.range_m)
+            .filter_map(|r| r.sight.range_m())
             .reduce(f64::min);
         assert!(behind.is_some_and(|m| (m - 0.3).abs() < 1e-9), "{behind:?}");
         let ahead = r
             .iter()
             .find(|r| r.bearing_rad.abs() < 0.05)
             .expect("ahead");
-        assert_eq!(ahead.range_m, Some(config.map_reach_m));
+        assert_eq!(ahead.sight, Sight::Wall(config.map_reach_m));
         // Remembered by IMU heading (here 2.0 rad while the map had it at π): blind, the
         // drone leans forward, away from the wall.
         let mut p = Proximity::new(&config);
@@ -421,29 +470,66 @@ mod tests {
         // No map walls, no garbage: nothing near; a bad yaw: no readings.
         let open = Grid::new(40, 40, 0.05, [-1.0, -1.0], crate::Cell::Free);
         let clear = map_readings(&open, [0.0, 0.0], 0.0, &config);
-        assert!(clear.iter().all(|r| r.range_m == Some(config.map_reach_m)));
+        assert!(
+            clear
+                .iter()
+                .all(|r| r.sight == Sight::Wall(config.map_reach_m))
+        );
         let mut q = Proximity::new(&config);
         q.observe(0.0, 0.0, &clear, &config);
         assert_eq!(q.nearest(0.5, &config), None, "nothing near");
         assert!(map_readings(&map, [0.0, 0.0], f64::NAN, &config).is_empty());
     }
 
+    /// The floor across the camera's view, from 2 to 4 m ahead, 0.9 m below the body: what
+    /// it measures toward a wall beyond its range, or through a door.
+    fn floor_ahead() -> Vec<[f64; 3]> {
+        (-60..=60)
+            .flat_map(|i| (0..20).map(move |j| (i, j)))
+            .map(|(i, j)| {
+                let d = 2.0 + f64::from(j) * 0.1;
+                [d, d * 0.6 * f64::from(i) / 60.0, -0.9]
+            })
+            .collect()
+    }
+
     #[test]
-    fn a_near_wall_that_then_shows_nothing_is_nearer_than_the_camera_measures() {
+    fn a_direction_that_shows_nothing_at_all_is_blocked_by_a_wall_too_near_to_range() {
         let config = ProximityConfig::default();
         let nothing = readings(Vec::<[f64; 3]>::new(), FOV, &config);
         assert_eq!(nothing.len(), 13);
-        // Near, then nothing for longer than a range is kept: still pushed away.
+        assert!(nothing.iter().all(|r| r.sight == Sight::Blocked));
+        // Never ranged near (it drifted to the wall backward, then turned to face it): a wall
+        // at `blocked_m` ahead, so it leans back.
+        let mut p = Proximity::new(&config);
+        p.observe(0.0, 0.0, &nothing, &config);
+        assert_eq!(p.nearest(0.1, &config), Some(config.blocked_m));
+        let [forward, left] = p.push(0.1, 0.0, &config);
+        assert!(forward < -0.05, "leans back: {forward}");
+        assert!(left.abs() < 1e-9, "{left}");
+        // Near, then nothing for longer than a range is kept: still pushed away, from the
+        // nearer range.
+        let mut q = Proximity::new(&config);
+        q.observe(0.0, 0.0, &readings(wall_ahead(0.3), FOV, &config), &config);
+        for t in 1..=8 {
+            q.observe(f64::from(t), 0.0, &nothing, &config);
+        }
+        assert_eq!(q.nearest(8.1, &config), Some(0.3));
+    }
+
+    #[test]
+    fn a_direction_that_shows_the_floor_and_no_wall_is_open() {
+        let config = ProximityConfig::default();
+        let open = readings(floor_ahead(), FOV, &config);
+        assert_eq!(open.len(), 13);
+        assert!(open.iter().all(|r| r.sight == Sight::Open), "{open:?}");
+        // Near, then the floor beyond (the camera swept from a wall to a door, or the drone
+        // left the wall): clear, no lean.
         let mut p = Proximity::new(&config);
         p.observe(0.0, 0.0, &readings(wall_ahead(0.5), FOV, &config), &config);
-        for t in 1..=8 {
-            p.observe(f64::from(t), 0.0, &nothing, &config);
-        }
-        assert!(p.push(8.1, 0.0, &config)[0] < -0.01);
-        // Far, then nothing (beyond the camera's range): clear.
-        let mut q = Proximity::new(&config);
-        q.observe(0.0, 0.0, &readings(wall_ahead(1.5), FOV, &config), &config);
-        q.observe(1.0, 0.0, &nothing, &config);
-        assert_eq!(q.nearest(1.1, &config), None);
+        assert!(p.push(0.1, 0.0, &config)[0] < -0.01);
+        p.observe(1.0, 0.0, &open, &config);
+        assert_eq!(p.nearest(1.1, &config), None);
+        assert_eq!(p.push(1.1, 0.0, &config), [0.0, 0.0]);
     }
 }

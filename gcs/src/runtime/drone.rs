@@ -2777,7 +2777,7 @@ mod tests {
                     let bearing = f64::from(i) * 0.1;
                     nav::proximity::Reading {
                         bearing_rad: bearing,
-                        range_m: Some(ahead_m / bearing.cos()),
+                        sight: nav::proximity::Sight::Wall(ahead_m / bearing.cos()),
                     }
                 })
                 .collect();

@@ -540,6 +540,7 @@ pub fn slam_frame(f: &CameraFrame, sensors: Option<FrameSensors>, known: bool) -
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nav::proximity::Sight;
 
     fn sample(t: f64, heading: f64) -> SensorSample {
         SensorSample {
@@ -602,24 +603,74 @@ mod tests {
             .iter()
             .min_by(|a, b| a.bearing_rad.abs().total_cmp(&b.bearing_rad.abs()))
             .expect("a direction ahead");
-        let range = ahead.range_m.expect("the wall ahead");
+        let range = ahead.sight.range_m().expect("the wall ahead");
         assert!((range - 1.1).abs() < 0.02, "{ahead:?}");
         // Left in the image is left of the body (positive bearings): the invalid strip
-        // leaves the leftmost directions without a range, the rightmost have one.
+        // leaves the leftmost directions blocked (nothing measured), the rightmost have a
+        // range.
         let leftmost = r
             .iter()
             .max_by(|a, b| a.bearing_rad.total_cmp(&b.bearing_rad));
         let rightmost = r
             .iter()
             .min_by(|a, b| a.bearing_rad.total_cmp(&b.bearing_rad));
-        assert!(leftmost.is_some_and(|l| l.bearing_rad > 0.4 && l.range_m.is_none()));
-        assert!(rightmost.is_some_and(|l| l.bearing_rad < -0.4 && l.range_m.is_some()));
+        assert!(leftmost.is_some_and(|l| l.bearing_rad > 0.4 && l.sight == Sight::Blocked));
+        assert!(rightmost.is_some_and(|l| l.bearing_rad < -0.4 && l.sight.range_m().is_some()));
         // A frame whose depth does not fit its size: nothing, no panic.
         let broken = RgbdFrame {
             depth_mm: vec![1000; 5],
             ..frame
         };
         assert!(proximity_readings(&broken, &body_from_camera, &config).is_empty());
+    }
+
+    #[test]
+    fn in_the_simulated_apartment_a_wall_too_near_to_range_is_blocked_and_a_corridor_open() {
+        // The simulator's camera on its drone, at every altitude band of an eight-drone fleet:
+        // a direction without a wall in range still shows the floor or the ceiling, which is
+        // what tells an opening from a wall inside the camera's minimum range.
+        let world = sitl::World::load("apartment").expect("the built-in world");
+        let camera = sitl::Camera::kinect(320, 240);
+        let body_from_camera = crate::fleet::sim_body_from_camera();
+        let config = ProximityConfig::default();
+        let look = |x: f64, y: f64, z: f64, yaw: f64| {
+            let map_from_body = Isometry3::new(
+                nalgebra::Vector3::new(x, y, z),
+                nalgebra::Vector3::z() * yaw,
+            );
+            let frame = sitl::render::render_frame(
+                &world,
+                &(map_from_body * body_from_camera),
+                &camera,
+                None,
+                1,
+                Duration::ZERO,
+            );
+            proximity_readings(&frame, &body_from_camera, &config)
+        };
+        let ahead = |r: &[Reading]| -> Vec<Sight> {
+            r.iter()
+                .filter(|r| r.bearing_rad.abs() < 0.1)
+                .map(|r| r.sight)
+                .collect()
+        };
+        for k in 0..8 {
+            let z = crate::fleet::altitude_band(k);
+            // East down the corridor (x = 4 m, between its walls at y = 4.0 and 5.4 m), in
+            // the directions that miss its sides within 4 m: the far wall is 10 m off, beyond
+            // the camera's range.
+            let corridor = ahead(&look(4.0, 4.7, z, 0.0));
+            assert!(
+                !corridor.is_empty() && corridor.iter().all(|s| *s == Sight::Open),
+                "{z} m: {corridor:?}"
+            );
+            // North at its wall, 0.3 m from the body's centre (0.2 m from the camera).
+            let wall = ahead(&look(4.0, 5.1, z, std::f64::consts::FRAC_PI_2));
+            assert!(
+                !wall.is_empty() && wall.iter().all(|s| *s == Sight::Blocked),
+                "{z} m: {wall:?}"
+            );
+        }
     }
 
     #[test]
