@@ -37,6 +37,11 @@ pub struct ProximityConfig {
     pub sectors: usize,
     /// A range older than this is forgotten (the drone drifts on meanwhile), seconds.
     pub max_age_s: f64,
+    /// A blocked direction ([`Sight::Blocked`]) is kept this long, seconds: while the camera
+    /// faces the wall, not after. Kept as long as a range, the lean it gives (the strongest a
+    /// camera gives) outlasted the wall's nearness: in SITL a drone leaned off one wall of the
+    /// 1.4 m corridor was carried into the other, and back, three times in 30 s.
+    pub blocked_max_age_s: f64,
     /// The drone leans away from walls nearer than this to its centre, metres…
     pub margin_m: f64,
     /// …with this much stick per metre inside the margin…
@@ -62,6 +67,7 @@ impl Default for ProximityConfig {
             bearing_step_rad: 5f64.to_radians(),
             sectors: 36,
             max_age_s: 4.0,
+            blocked_max_age_s: 1.0,
             margin_m: 0.6,
             gain: 0.25,
             max: 0.1,
@@ -196,7 +202,7 @@ pub fn map_readings(
 #[derive(Debug, Clone, PartialEq)]
 pub struct Proximity {
     /// Per sector (heading `k · 2π / n`, counter-clockwise from the IMU's zero): the range and
-    /// when it was seen.
+    /// until when it is kept.
     sectors: Vec<Option<(f64, f64)>>,
 }
 
@@ -227,27 +233,30 @@ impl Proximity {
             return;
         }
         // A frame's directions are finer than the sectors: the nearest wall of each sector's
-        // (`None` while only open directions fell in it).
-        let mut seen: Vec<Option<Option<f64>>> = vec![None; self.sectors.len()];
+        // and how long it is kept (`None` while only open directions fell in it).
+        let mut seen: Vec<Option<Option<(f64, f64)>>> = vec![None; self.sectors.len()];
         for r in readings {
             let k = self.sector(heading + r.bearing_rad);
-            let range = match r.sight {
-                Sight::Wall(m) => Some(m).filter(|m| m.is_finite()),
+            let wall = match r.sight {
+                Sight::Wall(m) => Some(m)
+                    .filter(|m| m.is_finite())
+                    .map(|m| (m, config.max_age_s)),
                 Sight::Open => None,
                 // Too near to range: nearer than it was ranged last, if that was nearer still.
-                Sight::Blocked => {
-                    Some(self.sectors[k].map_or(config.blocked_m, |(m, _)| m.min(config.blocked_m)))
-                }
+                Sight::Blocked => Some((
+                    self.sectors[k].map_or(config.blocked_m, |(m, _)| m.min(config.blocked_m)),
+                    config.blocked_max_age_s,
+                )),
             };
-            seen[k] = Some(match (seen[k].flatten(), range) {
-                (Some(a), Some(b)) => Some(a.min(b)),
+            seen[k] = Some(match (seen[k].flatten(), wall) {
+                (Some(a), Some(b)) => Some(if b.0 < a.0 { b } else { a }),
                 (a, b) => a.or(b),
             });
         }
         for (slot, seen) in self.sectors.iter_mut().zip(seen) {
             match seen {
                 None => {}
-                Some(Some(range)) => *slot = Some((range, stamp)),
+                Some(Some((range, keep_s))) => *slot = Some((range, stamp + keep_s)),
                 Some(None) => *slot = None,
             }
         }
@@ -264,9 +273,11 @@ impl Proximity {
         let n = self.sectors.len() as f64;
         let (mut sum, mut count) = ([0.0; 2], 0usize);
         for (k, slot) in self.sectors.iter().enumerate() {
-            let Some((range, seen)) = *slot else { continue };
+            let Some((range, until)) = *slot else {
+                continue;
+            };
             let inside = config.margin_m - range;
-            if inside <= 0.0 || now - seen > config.max_age_s {
+            if inside <= 0.0 || now > until {
                 continue;
             }
             let (s, c) = (k as f64 * TAU / n - heading).sin_cos();
@@ -286,13 +297,13 @@ impl Proximity {
         }
     }
 
-    /// The nearest range seen within `max_age_s` of `now`, if nearer than `map_reach_m` (the
-    /// map's ranges reach no further), metres: for logs.
+    /// The nearest range still kept at `now` (`max_age_s`, `blocked_max_age_s`), if nearer than
+    /// `map_reach_m` (the map's ranges reach no further), metres: for logs.
     pub fn nearest(&self, now: f64, config: &ProximityConfig) -> Option<f64> {
         self.sectors
             .iter()
             .flatten()
-            .filter(|(range, seen)| now - seen <= config.max_age_s && *range < config.map_reach_m)
+            .filter(|(range, until)| now <= *until && *range < config.map_reach_m)
             .map(|(range, _)| *range)
             .reduce(f64::min)
     }
@@ -507,6 +518,12 @@ mod tests {
         let [forward, left] = p.push(0.1, 0.0, &config);
         assert!(forward < -0.05, "leans back: {forward}");
         assert!(left.abs() < 1e-9, "{left}");
+        // Kept while the camera faces it, not for as long as a range: the lean would outlast
+        // the wall's nearness.
+        let gone = config.blocked_max_age_s + 0.1;
+        assert!(gone < config.max_age_s);
+        assert_eq!(p.nearest(gone, &config), None);
+        assert_eq!(p.push(gone, 0.0, &config), [0.0, 0.0]);
         // Near, then nothing for longer than a range is kept: still pushed away, from the
         // nearer range.
         let mut q = Proximity::new(&config);
