@@ -297,32 +297,6 @@ impl Proximity {
         }
     }
 
-    /// The sticks `[forward, left]` (body frame) of a drone heading `heading` (radians, IMU)
-    /// at `now`, kept off the walls round it: less any part toward the walls [`Self::push`]
-    /// leans it away from, plus that lean. For sticks flown on a pose that cannot keep it off
-    /// the walls: none, or visual odometry off the map, which facing a wall nearer than the
-    /// camera ranges measures little, and wrongly (in SITL its error jumped 0.3 m and the
-    /// position hold flew the drone toward the wall).
-    pub fn guard(
-        &self,
-        now: f64,
-        heading: f64,
-        sticks: [f64; 2],
-        config: &ProximityConfig,
-    ) -> [f64; 2] {
-        let push = self.push(now, heading, config);
-        let size = push[0].hypot(push[1]);
-        if size == 0.0 {
-            return sticks;
-        }
-        let away = push.map(|v| v / size);
-        let along = (sticks[0] * away[0] + sticks[1] * away[1]).min(0.0);
-        [
-            sticks[0] - along * away[0] + push[0],
-            sticks[1] - along * away[1] + push[1],
-        ]
-    }
-
     /// The nearest range still kept at `now` (`max_age_s`, `blocked_max_age_s`), if nearer than
     /// `map_reach_m` (the map's ranges reach no further), metres: for logs.
     pub fn nearest(&self, now: f64, config: &ProximityConfig) -> Option<f64> {
@@ -558,30 +532,6 @@ mod tests {
             q.observe(f64::from(t), 0.0, &nothing, &config);
         }
         assert_eq!(q.nearest(8.1, &config), Some(0.3));
-    }
-
-    #[test]
-    fn guarded_sticks_fly_nowhere_toward_a_near_wall_and_freely_elsewhere() {
-        let config = ProximityConfig::default();
-        let mut p = Proximity::new(&config);
-        p.observe(0.0, 0.0, &readings(wall_ahead(0.4), FOV, &config), &config);
-        let push = p.push(0.1, 0.0, &config);
-        assert!(push[0] < -0.02, "{push:?}");
-        // Forward and left, toward the wall ahead: the forward part goes, the lean comes,
-        // the left part stays.
-        let [forward, left] = p.guard(0.1, 0.0, [0.2, 0.1], &config);
-        assert!((forward - push[0]).abs() < 0.2 * push[0].abs(), "{forward}");
-        assert!((left - 0.1).abs() < 0.2 * push[0].abs(), "{left}");
-        // Away from it: kept, and the lean added.
-        let back = p.guard(0.1, 0.0, [-0.2, 0.0], &config);
-        assert!((back[0] - (-0.2 + push[0])).abs() < 1e-12, "{back:?}");
-        // No wall near (or long forgotten): the sticks as they were.
-        let gone = config.max_age_s + 0.1;
-        assert_eq!(p.guard(gone, 0.0, [0.2, 0.1], &config), [0.2, 0.1]);
-        assert_eq!(
-            Proximity::new(&config).guard(0.1, 0.0, [0.2, 0.1], &config),
-            [0.2, 0.1]
-        );
     }
 
     #[test]

@@ -1382,9 +1382,8 @@ impl Drone {
         self.blind_drift = Drift::default();
         self.tracking = false;
         let here = [pose[0], pose[1]];
-        // The map's walls all round, for the moment it goes blind (the camera sees only ahead);
-        // not lost, where the pose is off the map.
-        if let (Some(map), Some(heading), None) = (&self.map, telemetry.yaw_rad, self.lost_at) {
+        // The map's walls all round, for the moment it goes blind (the camera sees only ahead).
+        if let (Some(map), Some(heading)) = (&self.map, telemetry.yaw_rad) {
             let around = nav::proximity::map_readings(map, here, pose[3], &config.proximity);
             self.proximity
                 .observe(now, f64::from(heading), &around, &config.proximity);
@@ -1528,14 +1527,6 @@ impl Drone {
         if sweep {
             c.yaw = f64::from(self.sweep_yaw(config));
         }
-        // Lost, the position hold flies on visual odometry off the map: not toward the walls
-        // the camera sees near (facing one nearer than it ranges, odometry goes wrong).
-        if lost.is_some()
-            && let Some(heading) = telemetry.yaw_rad
-        {
-            [c.pitch, c.roll] =
-                self.keep_off_walls(now, f64::from(heading), [c.pitch, c.roll], config);
-        }
         self.set_sticks(Sticks {
             roll: c.roll as f32,
             pitch: c.pitch as f32,
@@ -1625,9 +1616,21 @@ impl Drone {
         // And off the walls round it, ranged by the camera or on the map before it went blind
         // (it drifts with the air meanwhile).
         if let Some(heading) = heading {
-            let kept =
-                self.keep_off_walls(now, heading, [f64::from(pitch), f64::from(roll)], config);
-            [pitch, roll] = kept.map(|v| v as f32);
+            let [forward, left] = self.proximity.push(now, heading, &config.proximity);
+            let pushing = forward != 0.0 || left != 0.0;
+            if pushing && !self.pushed_off {
+                tracing::debug!(
+                    drone = self.id + 1,
+                    stamp = now,
+                    nearest_m = self.proximity.nearest(now, &config.proximity),
+                    forward,
+                    left,
+                    "without a pose near a wall: leaning off it"
+                );
+            }
+            self.pushed_off = pushing;
+            pitch = (f64::from(pitch) + forward).clamp(-1.0, 1.0) as f32;
+            roll = (f64::from(roll) - left).clamp(-1.0, 1.0) as f32;
         }
         self.set_sticks(Sticks {
             roll,
@@ -1636,36 +1639,6 @@ impl Drone {
             yaw,
         });
         None
-    }
-
-    /// The pitch and roll sticks of a drone heading `heading` (IMU, radians) flying on a pose
-    /// that cannot keep it off the walls (none, or visual odometry off the map): nothing toward
-    /// the walls its camera (or the map, before) saw near, and a lean off them
-    /// ([`nav::proximity::Proximity::guard`]).
-    fn keep_off_walls(
-        &mut self,
-        now: f64,
-        heading: f64,
-        [pitch, roll]: [f64; 2],
-        config: &DroneConfig,
-    ) -> [f64; 2] {
-        // Roll is positive to the right; the lean's second part is to the left.
-        let [forward, left] = self
-            .proximity
-            .guard(now, heading, [pitch, -roll], &config.proximity);
-        let pushing = (forward, left) != (pitch, -roll);
-        if pushing && !self.pushed_off {
-            tracing::debug!(
-                drone = self.id + 1,
-                stamp = now,
-                nearest_m = self.proximity.nearest(now, &config.proximity),
-                forward,
-                left,
-                "flying without a pose on the map near a wall: leaning off it"
-            );
-        }
-        self.pushed_off = pushing;
-        [forward.clamp(-1.0, 1.0), (-left).clamp(-1.0, 1.0)]
     }
 
     /// At a loss (or going blind), which way its sweep will turn: back counter-clockwise if it
@@ -2841,62 +2814,6 @@ mod tests {
         // Seen near while it faced left (+y), before it turned back to +x: banked right.
         let s = blind_sticks(0.4, std::f64::consts::FRAC_PI_2);
         assert!(s.roll > 0.02 && s.pitch.abs() < 0.2 * s.roll, "{s:?}");
-    }
-
-    #[test]
-    fn a_lost_drone_on_visual_odometry_flies_no_hold_toward_a_wall_too_near_to_range() {
-        let config = DroneConfig::default();
-        // Lost at the origin facing +x (IMU heading 0), where its last keyframe was; its
-        // odometry then says it slides back at 0.3 m/s, so the hold pulls it forward. Its
-        // frames show `ahead` across its view: the sticks after a second.
-        let sticks = |ahead: nav::proximity::Sight| {
-            let vehicle = Arc::new(StubbornVehicle::default());
-            *vehicle.yaw.lock().expect("yaw") = Some(0.0);
-            let mut drone = exploring_drone(vehicle, &config);
-            drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.0, None, true);
-            drone.tick(0.1, &config);
-            let ranges: Vec<_> = (-5..=5)
-                .map(|i| nav::proximity::Reading {
-                    bearing_rad: f64::from(i) * 0.1,
-                    sight: ahead,
-                })
-                .collect();
-            let mut t: f64 = 0.1;
-            while t < 1.1 {
-                t += 0.1;
-                let fix = SlamFix {
-                    drone: 0,
-                    stamp: t,
-                    map_from_body: None,
-                    keyframe: false,
-                    inliers: None,
-                    weak: false,
-                    odometry: Some(slam::system::Odometry {
-                        since: t - 0.1,
-                        previous_from_body: Isometry3::translation(-0.03, 0.0, 0.0),
-                        inliers: 30,
-                    }),
-                    half_fov_rad: 0.5,
-                    ranges: ranges.clone(),
-                    heading: Some(0.0),
-                };
-                drone.take_fix(t, &fix, &config);
-                drone.tick(t, &config);
-            }
-            let pose = drone.pose().expect("flying on odometry");
-            assert!(pose[0] < -0.1, "odometry put it behind its hold: {pose:?}");
-            drone.sticks.expect("sticks")
-        };
-        // Open ahead (the floor beyond): the hold flies it forward.
-        let open = sticks(nav::proximity::Sight::Open);
-        assert!(open.pitch > 0.05, "{open:?}");
-        // A wall too near to range ahead: not forward, but leaning back off it.
-        let blocked = sticks(nav::proximity::Sight::Blocked);
-        assert!(blocked.pitch < -0.02, "{blocked:?}");
-        assert!(
-            blocked.roll.abs() < 0.2 * blocked.pitch.abs(),
-            "{blocked:?}"
-        );
     }
 
     #[test]
