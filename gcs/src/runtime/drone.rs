@@ -173,6 +173,10 @@ pub struct DroneConfig {
     /// the drone's centre, leads back out to it, and leads less far near walls
     /// ([`nav::avoid::keep_clear`]).
     pub keep_clear: KeepClear,
+    /// Holding a spot (a look around, a turn, lost), the setpoint leads back out to this much
+    /// room from the walls, not just [`KeepClear::clearance_m`], metres: the depth camera
+    /// (0.1 m ahead of the centre, ranging from 0.4 m) then measures every wall it turns to.
+    pub hold_clearance_m: f64,
     /// The mission planner plans from a drone's position while its uncertainty (1 σ) is at most
     /// this, metres: more than flying tolerates ([`EkfConfig::max_position_sigma`]), since a
     /// frontier and a path are chosen as well from a position known to a metre. A drone whose
@@ -318,6 +322,7 @@ impl Default for DroneConfig {
             ekf: EkfConfig::default(),
             hold_band_m: 0.1,
             keep_clear: KeepClear::default(),
+            hold_clearance_m: 0.55,
             plan_position_sigma_m: 1.0,
             stuck_s: 15.0,
             scan_s: 10.0,
@@ -1447,7 +1452,14 @@ impl Drone {
             _ => return None,
         }
         self.setpoint = match &self.map {
-            Some(map) => keep_clear(map, here, self.hold, &config.keep_clear),
+            Some(map) if self.tracking => keep_clear(map, here, self.hold, &config.keep_clear),
+            Some(map) => {
+                let room = KeepClear {
+                    clearance_m: config.keep_clear.clearance_m.max(config.hold_clearance_m),
+                    ..config.keep_clear
+                };
+                keep_clear(map, here, self.hold, &room)
+            }
             None => self.hold,
         };
         // Holding a spot (a look around, a turn, found again after a loss), the derivative
@@ -2814,6 +2826,34 @@ mod tests {
         // Seen near while it faced left (+y), before it turned back to +x: banked right.
         let s = blind_sticks(0.4, std::f64::consts::FRAC_PI_2);
         assert!(s.roll > 0.02 && s.pitch.abs() < 0.2 * s.roll, "{s:?}");
+    }
+
+    #[test]
+    fn a_drone_holding_a_spot_keeps_room_for_its_camera_to_range_every_wall() {
+        // Holding at the origin facing +x, a wall of the map 0.45 m ahead (x = 0.45–0.5 m):
+        // turned to it, the camera (0.1 m ahead of the centre) would be nearer than it ranges.
+        let setpoint = |hold_clearance_m: f64| {
+            let config = DroneConfig {
+                hold_clearance_m,
+                ..DroneConfig::default()
+            };
+            let mut drone = exploring_drone(Arc::default(), &config);
+            let mut map = Grid::new(40, 40, 0.05, [-1.0, -1.0], nav::Cell::Free);
+            for y in 0..40 {
+                map.set((29, y), nav::Cell::Occupied);
+            }
+            drone.set_map(Arc::new(map));
+            drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.0, None, true);
+            drone.tick(0.1, &config);
+            assert!(!drone.tracking, "holding a spot");
+            assert_eq!(drone.hold, [0.0, 0.0]);
+            drone.setpoint
+        };
+        // Out to 0.55 m from the wall: 0.1 m back.
+        let [x, y] = setpoint(DroneConfig::default().hold_clearance_m);
+        assert!((x + 0.1).abs() < 0.02 && y.abs() < 1e-9, "{x} {y}");
+        // With only the path's clearance (0.35 m), 0.45 m is room enough: held where it is.
+        assert_eq!(setpoint(0.0), [0.0, 0.0]);
     }
 
     #[test]
