@@ -2150,10 +2150,11 @@ mod tests {
         }
         let (walled, setpoint) = scanning(Some(map));
         assert!(walled.pitch < 0.0, "led back from the wall: {walled:?}");
+        // Holding a spot: out to the hold's clearance, not just the path's.
         assert!(
-            setpoint[0] < 0.0 && setpoint[0] > -0.1,
+            (setpoint[0] - (0.3 - config.hold_clearance_m)).abs() < 0.05,
             "out to {} m from the wall: {setpoint:?}",
-            config.keep_clear.clearance_m
+            config.hold_clearance_m
         );
     }
 
