@@ -242,9 +242,12 @@ impl Proximity {
                     .filter(|m| m.is_finite())
                     .map(|m| (m, config.max_age_s)),
                 Sight::Open => None,
-                // Too near to range: nearer than it was ranged last, if that was nearer still.
+                // Too near to range: nearer than it was ranged last, if that was nearer still
+                // and is still kept (a range forgotten says nothing of the wall now).
                 Sight::Blocked => Some((
-                    self.sectors[k].map_or(config.blocked_m, |(m, _)| m.min(config.blocked_m)),
+                    self.sectors[k]
+                        .filter(|&(_, until)| stamp <= until)
+                        .map_or(config.blocked_m, |(m, _)| m.min(config.blocked_m)),
                     config.blocked_max_age_s,
                 )),
             };
@@ -532,6 +535,12 @@ mod tests {
             q.observe(f64::from(t), 0.0, &nothing, &config);
         }
         assert_eq!(q.nearest(8.1, &config), Some(0.3));
+        // Ranged near long ago, forgotten, then nothing: the wall is at `blocked_m`, not at
+        // the forgotten range.
+        let mut old = Proximity::new(&config);
+        old.observe(0.0, 0.0, &readings(wall_ahead(0.25), FOV, &config), &config);
+        old.observe(10.0, 0.0, &nothing, &config);
+        assert_eq!(old.nearest(10.1, &config), Some(config.blocked_m));
     }
 
     #[test]
