@@ -1562,13 +1562,16 @@ impl Slam {
         // How far (metres, horizontally) the body's move since the last trusted frame is from
         // the move the vehicle predicts over the same time.
         let off_from = |n: usize, n_from_camera: Isometry3<f64>, then: Isometry3<f64>| {
-            frame.predicted_body.filter(|_| tracking).map_or(0.0, |now| {
-                let body_then = self.nodes[n].pose * n_from_camera * camera_from_body;
-                let body_now = pose * camera_from_body;
-                let slam_moved = body_now.translation.vector - body_then.translation.vector;
-                let vehicle_moved = now.translation.vector - then.translation.vector;
-                (slam_moved - vehicle_moved).xy().norm()
-            })
+            frame
+                .predicted_body
+                .filter(|_| tracking)
+                .map_or(0.0, |now| {
+                    let body_then = self.nodes[n].pose * n_from_camera * camera_from_body;
+                    let body_now = pose * camera_from_body;
+                    let slam_moved = body_now.translation.vector - body_then.translation.vector;
+                    let vehicle_moved = now.translation.vector - then.translation.vector;
+                    (slam_moved - vehicle_moved).xy().norm()
+                })
         };
         let off_vehicle = r.trusted.map_or(0.0, |(n, c, then)| off_from(n, c, then));
         // The same from the last frame on enough inliers to check others by, while it is recent.
