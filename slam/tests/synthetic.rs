@@ -665,15 +665,20 @@ fn on_a_vehicle_a_weak_registration_away_from_the_motion_is_not_to_be_flown_on()
 /// on too few inliers and the motion so far allowed any error: what decides whether one is
 /// built on is the vehicle alone.
 fn few_inliers_forward(name: &str, setup: impl FnOnce(&mut Flight)) -> Flight {
-    let mut f = Flight::new(
-        1,
-        &[true],
+    forward_and_hold(
+        name,
         SlamConfig {
             keyframe_min_inliers: usize::MAX,
             weak_agreement: (1.0, 1.0),
             ..SlamConfig::default()
         },
-    );
+        setup,
+    )
+}
+
+/// One drone, `setup` then flown 0.8 m forward and held 2 s with `config`.
+fn forward_and_hold(name: &str, config: SlamConfig, setup: impl FnOnce(&mut Flight)) -> Flight {
+    let mut f = Flight::new(1, &[true], config);
     setup(&mut f);
     let (x, y, yaw) = start_of(&f, 0);
     let ahead = [x + 0.8 * yaw.cos(), y + 0.8 * yaw.sin(), 1.0, yaw];
@@ -718,6 +723,51 @@ fn on_a_vehicle_a_weak_registration_away_from_its_own_predicted_move_is_not_buil
     assert!(drifting.slam.stats().keyframes * 2 <= honest_keyframes);
     let counted = drifting.slam.estimate(0).map_or(0, |e| e.weak_frames);
     assert_eq!(counted, drifting.weak[0]);
+}
+
+#[test]
+fn on_a_vehicle_a_registration_on_fewer_than_the_checked_inliers_away_from_its_move_is_weak_while_the_check_is_fresh()
+ {
+    // Flying forward and hovering, every registration counted as one on enough inliers for a
+    // keyframe but fewer than `vehicle_check_inliers`, so the only frame to check by is the
+    // first. Told the truth, the vehicle passes every one; predicting a slide of 0.3 m/s that
+    // is not there, it makes them weak from 0.1 m of slide on, for as long as the first frame
+    // is fresh enough to check by.
+    let run = |drift_mps: f64, vehicle_check_s: f64| {
+        let config = SlamConfig {
+            keyframe_min_inliers: 0,
+            vehicle_check_inliers: usize::MAX,
+            vehicle_check_s,
+            ..SlamConfig::default()
+        };
+        forward_and_hold(
+            &format!("drift {drift_mps} m/s, checked for {vehicle_check_s} s"),
+            config,
+            |f| {
+                f.predicted_height_error = Some(0.0);
+                f.predicted_x_drift_mps = drift_mps;
+            },
+        )
+    };
+    let honest = run(0.0, f64::INFINITY);
+    assert_eq!(honest.weak[0], 0);
+    assert!(honest.tracked[0] * 10 >= honest.frames[0] * 9);
+    let always = run(0.3, f64::INFINITY);
+    assert!(
+        always.weak[0] * 10 >= always.frames[0] * 8,
+        "{} of {} weak",
+        always.weak[0],
+        always.frames[0]
+    );
+    // Checked for 1 s: the frames from a third of a second (0.1 m of slide) to a second.
+    let fresh = run(0.3, 1.0);
+    assert!(
+        fresh.weak[0] > 0 && fresh.weak[0] * 3 <= always.weak[0],
+        "{} weak checked for 1 s, {} always",
+        fresh.weak[0],
+        always.weak[0]
+    );
+    assert_eq!(run(0.3, 0.0).weak[0], 0);
 }
 
 #[test]
