@@ -1062,22 +1062,18 @@ impl Slam {
         } else if let Some(n) = self.robots[k].reference {
             let r = &mut self.robots[k];
             r.lost_last = None;
-            let strong = match report.tracking {
-                Tracking::Tracked { inliers } => inliers >= self.config.keyframe_min_inliers,
+            // Placed on a registration of at least `needed` inliers (or none needed).
+            let placed_on = |needed: usize| match report.tracking {
+                Tracking::Tracked { inliers } => inliers >= needed,
                 Tracking::Started | Tracking::Known | Tracking::Relocalised { .. } => true,
                 Tracking::Weak { .. } | Tracking::Lost(_) => false,
             };
-            if strong {
+            if placed_on(self.config.keyframe_min_inliers) {
                 r.trusted = frame
                     .predicted_body
                     .map(|body| (n, r.reference_from_camera, body));
             }
-            let checked = match report.tracking {
-                Tracking::Tracked { inliers } => inliers >= self.config.vehicle_check_inliers,
-                Tracking::Started | Tracking::Known | Tracking::Relocalised { .. } => true,
-                Tracking::Weak { .. } | Tracking::Lost(_) => false,
-            };
-            if checked {
+            if placed_on(self.config.vehicle_check_inliers) {
                 r.checked = frame
                     .predicted_body
                     .map(|body| (n, r.reference_from_camera, body, frame.stamp));
