@@ -647,10 +647,9 @@ struct Robot {
     /// reference keyframe, the camera relative to it, and the body the vehicle predicted then
     /// ([`Frame::predicted_body`]). Weak registrations are held to how far the vehicle says it
     /// moved since ([`SlamConfig::vehicle_agreement_m`]).
-    trusted: Option<(usize, Isometry3<f64>, Isometry3<f64>)>,
-    /// As [`Robot::trusted`], for frames on at least [`SlamConfig::vehicle_check_inliers`], with
-    /// the frame's time.
-    checked: Option<(usize, Isometry3<f64>, Isometry3<f64>, f64)>,
+    trusted: Option<VehicleFix>,
+    /// As [`Robot::trusted`], for frames on at least [`SlamConfig::vehicle_check_inliers`].
+    checked: Option<VehicleFix>,
     nodes: Vec<usize>,
     stamp: f64,
     frames: usize,
@@ -664,6 +663,20 @@ struct Robot {
     track: Vec<(f64, usize, Isometry3<f64>)>,
     /// While lost, the last frame (for visual odometry): its time and what it saw.
     lost_last: Option<(f64, Arc<Observation>)>,
+}
+
+/// A frame of a vehicle placed by the SLAM, kept to check later registrations by the vehicle's
+/// own predicted move since it.
+#[derive(Debug, Clone, Copy)]
+struct VehicleFix {
+    /// Its reference keyframe…
+    node: usize,
+    /// …and the camera relative to it.
+    node_from_camera: Isometry3<f64>,
+    /// The body the vehicle predicted then ([`Frame::predicted_body`]).
+    predicted_body: Isometry3<f64>,
+    /// The frame's time, seconds.
+    stamp: f64,
 }
 
 /// One optimisation of one coordinate frame's graph.
@@ -1068,15 +1081,17 @@ impl Slam {
                 Tracking::Started | Tracking::Known | Tracking::Relocalised { .. } => true,
                 Tracking::Weak { .. } | Tracking::Lost(_) => false,
             };
+            let fix = frame.predicted_body.map(|predicted_body| VehicleFix {
+                node: n,
+                node_from_camera: r.reference_from_camera,
+                predicted_body,
+                stamp: frame.stamp,
+            });
             if placed_on(self.config.keyframe_min_inliers) {
-                r.trusted = frame
-                    .predicted_body
-                    .map(|body| (n, r.reference_from_camera, body));
+                r.trusted = fix;
             }
             if placed_on(self.config.vehicle_check_inliers) {
-                r.checked = frame
-                    .predicted_body
-                    .map(|body| (n, r.reference_from_camera, body, frame.stamp));
+                r.checked = fix;
             }
             r.track.push((frame.stamp, n, r.reference_from_camera));
         }
@@ -1557,24 +1572,27 @@ impl Slam {
         };
         // How far (metres, horizontally) the body's move since the last trusted frame is from
         // the move the vehicle predicts over the same time.
-        let off_from = |n: usize, n_from_camera: Isometry3<f64>, then: Isometry3<f64>| {
+        let off_from = |then: &VehicleFix| {
             frame
                 .predicted_body
                 .filter(|_| tracking)
                 .map_or(0.0, |now| {
-                    let body_then = self.nodes[n].pose * n_from_camera * camera_from_body;
+                    let body_then =
+                        self.nodes[then.node].pose * then.node_from_camera * camera_from_body;
                     let body_now = pose * camera_from_body;
                     let slam_moved = body_now.translation.vector - body_then.translation.vector;
-                    let vehicle_moved = now.translation.vector - then.translation.vector;
+                    let vehicle_moved =
+                        now.translation.vector - then.predicted_body.translation.vector;
                     (slam_moved - vehicle_moved).xy().norm()
                 })
         };
-        let off_vehicle = r.trusted.map_or(0.0, |(n, c, then)| off_from(n, c, then));
+        let off_vehicle = r.trusted.as_ref().map_or(0.0, off_from);
         // The same from the last frame on enough inliers to check others by, while it is recent.
         let off_checked = r
             .checked
-            .filter(|&(.., at)| frame.stamp - at <= self.config.vehicle_check_s)
-            .map_or(0.0, |(n, c, then, _)| off_from(n, c, then));
+            .filter(|c| frame.stamp - c.stamp <= self.config.vehicle_check_s)
+            .as_ref()
+            .map_or(0.0, off_from);
         // A robot with an IMU is a vehicle even when its filter has given up predicting it
         // (too long without a pose to fly on): then nothing can check a registration on few
         // inliers against the vehicle's move, and it is weak whatever the motion so far says.
