@@ -21,7 +21,9 @@ use slam::system::{Slam, SlamConfig};
 use slam::trajectory::Stamped;
 
 use gcs::evaluate::{WallError, coverage, reachable_free, wall_error};
-use gcs::fleet::{LinkKind, SimFleet, SimFleetConfig, sim_body_from_camera};
+use gcs::fleet::{
+    LOWEST_BAND_M, LinkKind, SimFleet, SimFleetConfig, altitude_band, sim_body_from_camera,
+};
 use gcs::gui::Station;
 use gcs::outputs;
 use gcs::record::{Record, Recorder, Setup, SetupDrone};
@@ -39,6 +41,10 @@ pub struct SimArgs {
     /// Number of drones (1–8).
     #[arg(long, default_value_t = 2)]
     pub drones: usize,
+    /// Drone 1's altitude band, metres; each further drone flies 0.15 m higher, so paths may
+    /// cross. The highest must stay within the 0.3–2.0 m the map's walls are taken from.
+    #[arg(long, value_name = "METRES", default_value_t = LOWEST_BAND_M)]
+    pub altitude: f64,
     /// How the station talks to the drones.
     #[arg(long, value_enum, default_value_t = LinkKind::Mavlink)]
     pub link: LinkKind,
@@ -296,6 +302,21 @@ fn validate(args: &ExploreArgs) -> anyhow::Result<Vec<Fault>> {
     if !(1..=8).contains(&args.sim.drones) {
         bail!("--drones {} must be 1 to 8", args.sim.drones);
     }
+    if !(args.sim.altitude.is_finite() && args.sim.altitude >= 0.3) {
+        bail!(
+            "--altitude {} must be 0.3 metres or more: the map's walls are taken from 0.3 to 2.0 m",
+            args.sim.altitude
+        );
+    }
+    let highest = altitude_band(args.sim.altitude, args.sim.drones - 1);
+    if highest > 2.0 {
+        bail!(
+            "--altitude {} puts drone {} at {highest:.2} m, above the 2.0 m the map's walls are \
+             taken up to: lower it, or fly fewer drones",
+            args.sim.altitude,
+            args.sim.drones
+        );
+    }
     if !(args.sim.speed.is_finite() && (0.1..=20.0).contains(&args.sim.speed)) {
         bail!(
             "--speed {} must be between 0.1 and 20 (simulated seconds per second)",
@@ -465,6 +486,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
         flight_time_s: args.sim.flight_time * 60.0,
         battery_swap_s: args.sim.battery_swap,
         tlog_dir: (!args.log.no_log).then(|| args.out.clone()),
+        lowest_band_m: args.sim.altitude,
     })?;
     eprintln!(
         "explore: world '{}', {} drone(s) over {}, {} assignment, poses from {}, {}× real time",

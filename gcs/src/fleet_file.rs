@@ -9,7 +9,7 @@
 //! camera = "tcpout:127.0.0.1:5900"     # the TCP frame stream carrying its camera
 //! camera_id = 0                        # its vehicle id in that stream (default: its order there)
 //! start = [1.0, 7.5, 0.0]              # x, y (metres), yaw (radians) in the map, if known
-//! altitude = 0.9                       # its altitude band, metres (default 0.9 + 0.15·K)
+//! altitude = 0.9                       # its altitude band, metres (default 0.75 + 0.15·K)
 //! channels = "ardupilot"               # or "thesis" (the thesis's reversed Naza wiring)
 //! signing_key = "alpha"                # MAVLink only: sign with this key (`gcs key list`) and
 //!                                      # refuse anything not signed with it
@@ -22,7 +22,7 @@ use anyhow::{Context, bail};
 use link::{Address, ChannelMap};
 use serde::Deserialize;
 
-use crate::fleet::{LinkKind, altitude_band};
+use crate::fleet::{LOWEST_BAND_M, LinkKind, altitude_band};
 
 /// The fleet file.
 #[derive(Debug, Deserialize)]
@@ -114,7 +114,7 @@ pub fn parse(text: &str, origin: &str) -> anyhow::Result<Vec<Vehicle>> {
             {
                 bail!("{which}: start {s:?} must be finite x, y, yaw");
             }
-            let altitude = v.altitude.unwrap_or_else(|| altitude_band(k));
+            let altitude = v.altitude.unwrap_or_else(|| altitude_band(LOWEST_BAND_M, k));
             if !(altitude.is_finite() && (0.3..=2.5).contains(&altitude)) {
                 bail!("{which}: altitude {altitude} must be 0.3 to 2.5 metres");
             }

@@ -367,7 +367,8 @@ fn two_drones_keep_exploring_the_open_hall_of_a_real_building() {
     // The Willow Garage map: the drones start in a hall wider than the camera reaches, so the
     // first frontier is one ring around them. Its goal used to be the ring's centroid, where the
     // drones already were: both gave it up, and the mission "completed" after 30 s with 1.6 % of
-    // the building seen. Two simulated minutes must leave them still exploring, well out.
+    // the building seen. Two simulated minutes must leave them still exploring, well out. They
+    // fly the altitude bands asked for: drone 1 at 1.2 m, drone 2 0.15 m above it.
     let map = format!(
         "{}/../../shared/data/maps/willow-full.yaml",
         env!("CARGO_MANIFEST_DIR")
@@ -385,6 +386,8 @@ fn two_drones_keep_exploring_the_open_hall_of_a_real_building() {
             "20",
             "--timeout",
             "120",
+            "--altitude",
+            "1.2",
             "--no-log",
         ],
     );
@@ -393,6 +396,14 @@ fn two_drones_keep_exploring_the_open_hall_of_a_real_building() {
     assert_eq!(summary["all_landed"], true, "{summary}");
     for d in summary["drones"].as_array().expect("drones") {
         assert!(number(&d["path_length_m"]) > 20.0, "{d}");
+    }
+    for (k, band) in [(1, 1.2), (2, 1.35)] {
+        let truth = slam::trajectory::read_tum(out.join(format!("drone{k}-truth.tum")))
+            .expect("TUM trajectory");
+        let mut z: Vec<f64> = truth.iter().map(|p| p.pose.translation.z).collect();
+        z.sort_by(f64::total_cmp);
+        let median = z.get(z.len() / 2).copied().unwrap_or(f64::NAN);
+        assert!((median - band).abs() < 0.05, "drone {k} flew at {median} m");
     }
     std::fs::remove_dir_all(&out).ok();
 }
@@ -712,6 +723,18 @@ fn bad_explore_arguments_are_refused_before_anything_starts() {
         (vec!["explore", "--drones", "9"], "must be 1 to 8"),
         (vec!["explore", "--drones", "0"], "must be 1 to 8"),
         (vec!["explore", "--speed", "100"], "between 0.1 and 20"),
+        (
+            vec!["explore", "--drones", "8", "--altitude", "1.2"],
+            "puts drone 8 at 2.25 m, above the 2.0 m",
+        ),
+        (
+            vec!["explore", "--altitude", "0.2"],
+            "--altitude 0.2 must be 0.3 metres or more",
+        ),
+        (
+            vec!["explore", "--altitude", "NaN"],
+            "--altitude NaN must be 0.3 metres or more",
+        ),
         (
             vec!["explore", "--log-camera-hz=-2"],
             "must be 0 (no frames) or more",

@@ -59,6 +59,7 @@ fn window_buttons_fly_the_simulated_fleet_and_show_a_lost_link() {
         flight_time_s: 720.0,
         battery_swap_s: None,
         tlog_dir: None,
+        lowest_band_m: gcs::fleet::LOWEST_BAND_M,
     })
     .expect("the simulated fleet starts");
     let SimFleet {

@@ -655,7 +655,7 @@ mod tests {
                 .collect()
         };
         for k in 0..8 {
-            let z = crate::fleet::altitude_band(k);
+            let z = crate::fleet::altitude_band(crate::fleet::LOWEST_BAND_M, k);
             // East down the corridor (x = 4 m, between its walls at y = 4.0 and 5.4 m), in
             // the directions that miss its sides within 4 m: the far wall is 10 m off, beyond
             // the camera's range.
