@@ -42,7 +42,7 @@ pub struct SimArgs {
     #[arg(long, default_value_t = 2)]
     pub drones: usize,
     /// Drone 1's altitude band, metres; each further drone flies 0.15 m higher, so paths may
-    /// cross. The highest must stay within the 0.3–2.0 m the map's walls are taken from.
+    /// cross. Every band must lie within the heights the map's walls are taken from (0.3–2.0 m).
     #[arg(long, value_name = "METRES", default_value_t = LOWEST_BAND_M)]
     pub altitude: f64,
     /// How the station talks to the drones.
@@ -302,17 +302,21 @@ fn validate(args: &ExploreArgs) -> anyhow::Result<Vec<Fault>> {
     if !(1..=8).contains(&args.sim.drones) {
         bail!("--drones {} must be 1 to 8", args.sim.drones);
     }
-    if !(args.sim.altitude.is_finite() && args.sim.altitude >= 0.3) {
+    // Every band within the heights the map's walls are taken from.
+    let occupancy = slam::occupancy::OccupancyConfig::default();
+    let (low, high) = (occupancy.occupancy_min_z, occupancy.occupancy_max_z);
+    if !(args.sim.altitude.is_finite() && args.sim.altitude >= low) {
         bail!(
-            "--altitude {} must be 0.3 metres or more: the map's walls are taken from 0.3 to 2.0 m",
+            "--altitude {} must be {low:.1} metres or more: the map's walls are taken from \
+             {low:.1} to {high:.1} m",
             args.sim.altitude
         );
     }
     let highest = altitude_band(args.sim.altitude, args.sim.drones - 1);
-    if highest > 2.0 {
+    if highest > high {
         bail!(
-            "--altitude {} puts drone {} at {highest:.2} m, above the 2.0 m the map's walls are \
-             taken up to: lower it, or fly fewer drones",
+            "--altitude {} puts drone {} at {highest:.2} m, above the {high:.1} m the map's walls \
+             are taken up to: lower it, or fly fewer drones",
             args.sim.altitude,
             args.sim.drones
         );
