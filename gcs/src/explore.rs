@@ -22,7 +22,8 @@ use slam::trajectory::Stamped;
 
 use gcs::evaluate::{WallError, coverage, reachable_free, wall_error};
 use gcs::fleet::{
-    LOWEST_BAND_M, LinkKind, SimFleet, SimFleetConfig, altitude_band, sim_body_from_camera,
+    LOWEST_BAND_M, LinkKind, SimFleet, SimFleetConfig, altitude_band, band_limits,
+    sim_body_from_camera,
 };
 use gcs::gui::Station;
 use gcs::outputs;
@@ -303,8 +304,7 @@ fn validate(args: &ExploreArgs) -> anyhow::Result<Vec<Fault>> {
         bail!("--drones {} must be 1 to 8", args.sim.drones);
     }
     // Every band within the heights the map's walls are taken from.
-    let occupancy = slam::occupancy::OccupancyConfig::default();
-    let (low, high) = (occupancy.occupancy_min_z, occupancy.occupancy_max_z);
+    let (low, high) = band_limits();
     if !(args.sim.altitude.is_finite() && args.sim.altitude >= low) {
         bail!(
             "--altitude {} must be {low:.1} metres or more: the map's walls are taken from \

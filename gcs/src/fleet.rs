@@ -92,6 +92,14 @@ pub fn altitude_band(lowest: f64, k: usize) -> f64 {
     lowest + BAND_STEP_M * k as f64
 }
 
+/// The heights the map's walls are taken from (`slam::occupancy::OccupancyConfig`), metres, low
+/// and high: every drone's altitude band must lie within them, or it flies at a height where
+/// the map marks no wall.
+pub fn band_limits() -> (f64, f64) {
+    let occupancy = slam::occupancy::OccupancyConfig::default();
+    (occupancy.occupancy_min_z, occupancy.occupancy_max_z)
+}
+
 /// The camera mounting of the simulated vehicles.
 pub fn sim_body_from_camera() -> Isometry3<f64> {
     sitl::Vehicle::new(sitl::VehicleParams::default(), 0.0, 0.0, 0.0).map_from_camera()

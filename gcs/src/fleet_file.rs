@@ -9,7 +9,7 @@
 //! camera = "tcpout:127.0.0.1:5900"     # the TCP frame stream carrying its camera
 //! camera_id = 0                        # its vehicle id in that stream (default: its order there)
 //! start = [1.0, 7.5, 0.0]              # x, y (metres), yaw (radians) in the map, if known
-//! altitude = 0.9                       # its altitude band, metres (default 0.75 + 0.15·K)
+//! altitude = 0.9                       # its altitude band, metres, 0.3–2.0 (default 0.75 + 0.15·K)
 //! channels = "ardupilot"               # or "thesis" (the thesis's reversed Naza wiring)
 //! signing_key = "alpha"                # MAVLink only: sign with this key (`gcs key list`) and
 //!                                      # refuse anything not signed with it
@@ -22,7 +22,7 @@ use anyhow::{Context, bail};
 use link::{Address, ChannelMap};
 use serde::Deserialize;
 
-use crate::fleet::{LOWEST_BAND_M, LinkKind, altitude_band};
+use crate::fleet::{LOWEST_BAND_M, LinkKind, altitude_band, band_limits};
 
 /// The fleet file.
 #[derive(Debug, Deserialize)]
@@ -115,8 +115,12 @@ pub fn parse(text: &str, origin: &str) -> anyhow::Result<Vec<Vehicle>> {
                 bail!("{which}: start {s:?} must be finite x, y, yaw");
             }
             let altitude = v.altitude.unwrap_or_else(|| altitude_band(LOWEST_BAND_M, k));
-            if !(altitude.is_finite() && (0.3..=2.5).contains(&altitude)) {
-                bail!("{which}: altitude {altitude} must be 0.3 to 2.5 metres");
+            let (low, high) = band_limits();
+            if !(altitude.is_finite() && (low..=high).contains(&altitude)) {
+                bail!(
+                    "{which}: altitude {altitude} must be {low:.1} to {high:.1} metres, the \
+                     heights the map's walls are taken from"
+                );
             }
             let channels = match v.channels.as_deref() {
                 None => None,
@@ -194,5 +198,29 @@ channels = "thesis"
         assert!(e.contains("f.toml is not a fleet file"), "{e}");
         let e = err("");
         assert!(e.contains("0 [[vehicle]] tables"), "{e}");
+    }
+
+    #[test]
+    fn every_altitude_lies_where_the_map_takes_walls() {
+        let (low, high) = band_limits();
+        let with = |altitude: f64| {
+            TWO.replace("start = [1.0, 7.5, 0.0]", &format!("altitude = {altitude}"))
+        };
+        for ok in [low, 1.2, high] {
+            assert_eq!(parse(&with(ok), "f.toml").expect("valid")[0].altitude, ok);
+        }
+        // TOML spells not-a-number `nan`.
+        let nan = TWO.replace("start = [1.0, 7.5, 0.0]", "altitude = nan");
+        for bad in [with(low - 0.05), with(high + 0.2), nan] {
+            let e = format!("{:#}", parse(&bad, "f.toml").expect_err("refused"));
+            assert!(
+                e.contains("vehicle 1: altitude") && e.contains("must be 0.3 to 2.0 metres"),
+                "{e}"
+            );
+        }
+        // Eight vehicles, the most a fleet has, on their default bands.
+        let one = "[[vehicle]]\nprotocol = \"mavlink\"\naddress = \"tcpout:127.0.0.1:5760\"\ncamera = \"tcpout:127.0.0.1:5900\"\n";
+        let eight = parse(&one.repeat(8), "f.toml").expect("eight fit");
+        assert!(eight.iter().all(|v| (low..=high).contains(&v.altitude)));
     }
 }
