@@ -1613,6 +1613,19 @@ impl Slam {
                     && off_checked > self.config.vehicle_agreement_m
             };
         r.weak_frames += usize::from(weak);
+        if weak {
+            // Which rule held it back: a stretch of these starves the vehicle's filter of fixes
+            // even while they are right.
+            tracing::debug!(
+                robot = k,
+                stamp = frame.stamp,
+                inliers = reg.inliers,
+                without_depth = reg.without_depth,
+                off_vehicle_m = off_vehicle,
+                off_checked_m = off_checked,
+                "weak registration: its frame is placed, nothing is built on it"
+            );
+        }
         let was_lost = r.state != RobotState::Tracking;
         if !weak {
             r.velocity = (!was_lost).then(|| last_pose.inverse() * pose);
