@@ -76,12 +76,14 @@ pub struct SimFleet {
 }
 
 /// The lowest altitude band, drone 1's, metres. The simulated Kinect sees ±24.6° vertically, so
-/// from 0.75 m the floor's tiles come into view 1.6 m ahead (from 0.9 m, 2.0 m; from 1.05 m,
-/// 2.3 m), and before a bare wall they are what a frame registers on. In SITL (two drones, 70
-/// missions a band pair) a drone lost a median of 55 frames a mission at 1.05 m, 27–28 at 0.9 m
-/// and 11 at 0.75 m; the bands 0.75 and 0.9 m lost 43 % fewer frames in all than 0.9 and 1.05 m
-/// (`docs/exploration-history.md`, stop 78).
-pub const LOWEST_BAND_M: f64 = 0.75;
+/// from 0.6 m the floor's tiles come into view 1.3 m ahead (from 0.75 m, 1.6 m; from 0.9 m,
+/// 2.0 m; from 1.05 m, 2.3 m), and before a bare wall they are what a frame registers on. In
+/// SITL (two drones on SLAM poses) the lower the pair, the fewer frames lost: the bands 0.75
+/// and 0.9 m lost 43 % fewer in all than 0.9 and 1.05 m (70 missions a pair, stop 78), and 0.6
+/// and 0.75 m 65 % fewer than 0.75 and 0.9 m, with no collision against 6 in 3 missions and no
+/// drone leaving its mission against 4 (56 missions side by side, stop 79;
+/// `docs/benchmarks.md`).
+pub const LOWEST_BAND_M: f64 = 0.6;
 
 /// How much higher each further drone flies than the one before it, metres.
 pub const BAND_STEP_M: f64 = 0.15;

@@ -9,7 +9,7 @@
 //! camera = "tcpout:127.0.0.1:5900"     # the TCP frame stream carrying its camera
 //! camera_id = 0                        # its vehicle id in that stream (default: its order there)
 //! start = [1.0, 7.5, 0.0]              # x, y (metres), yaw (radians) in the map, if known
-//! altitude = 0.9                       # its altitude band, metres, 0.3–2.0 (default 0.75 + 0.15·K)
+//! altitude = 0.9                       # its altitude band, metres, 0.3–2.0 (default 0.6 + 0.15·K)
 //! channels = "ardupilot"               # or "thesis" (the thesis's reversed Naza wiring)
 //! signing_key = "alpha"                # MAVLink only: sign with this key (`gcs key list`) and
 //!                                      # refuse anything not signed with it
