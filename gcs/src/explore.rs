@@ -22,7 +22,7 @@ use slam::trajectory::Stamped;
 
 use gcs::evaluate::{WallError, coverage, reachable_free, wall_error};
 use gcs::fleet::{
-    LOWEST_BAND_M, LinkKind, SimFleet, SimFleetConfig, altitude_band, band_limits,
+    BAND_STEP_M, LOWEST_BAND_M, LinkKind, SimFleet, SimFleetConfig, altitude_band, band_limits,
     sim_body_from_camera,
 };
 use gcs::gui::Station;
@@ -33,6 +33,16 @@ use gcs::runtime::{MissionState, Operator, Outcome, Runtime, RuntimeConfig};
 
 use crate::gui_cmd::{LogArgs, Window, WindowArgs, beside_window};
 
+/// `--altitude`'s help, from the constants it names (so it cannot go stale).
+fn altitude_help() -> String {
+    let (low, high) = band_limits();
+    format!(
+        "Drone 1's altitude band, metres; each further drone flies {BAND_STEP_M} m higher, so \
+         paths may cross. Every band must lie within the heights the map's walls are taken \
+         from ({low:.1}–{high:.1} m)"
+    )
+}
+
 /// The simulated fleet, as `gcs explore` and `gcs gui` take it.
 #[derive(Args, Debug, Clone)]
 pub struct SimArgs {
@@ -42,9 +52,9 @@ pub struct SimArgs {
     /// Number of drones (1–8).
     #[arg(long, default_value_t = 2)]
     pub drones: usize,
-    /// Drone 1's altitude band, metres; each further drone flies 0.15 m higher, so paths may
-    /// cross. Every band must lie within the heights the map's walls are taken from (0.3–2.0 m).
-    #[arg(long, value_name = "METRES", default_value_t = LOWEST_BAND_M)]
+    /// Drone 1's altitude band, metres; each further drone flies higher (the help text gives
+    /// the step and the heights every band must lie within: [`altitude_help`]).
+    #[arg(long, value_name = "METRES", default_value_t = LOWEST_BAND_M, help = altitude_help())]
     pub altitude: f64,
     /// How the station talks to the drones.
     #[arg(long, value_enum, default_value_t = LinkKind::Mavlink)]

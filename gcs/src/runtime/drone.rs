@@ -81,6 +81,19 @@ pub enum StartSequence {
     Shield,
 }
 
+impl StartSequence {
+    /// Whether the vehicle's own land mode holds its position as it descends: an autopilot's
+    /// LAND does; the shield's land only centres the sticks (the Naza in ATTI drifts with
+    /// whatever speed and draught it has), but lets the station's roll and pitch through
+    /// ([`DroneConfig::steer_landing`]).
+    pub fn land_holds_position(self) -> bool {
+        match self {
+            StartSequence::Mavlink => true,
+            StartSequence::Shield => false,
+        }
+    }
+}
+
 /// One vehicle of the fleet as the mission runtime gets it.
 pub struct DroneSpec {
     /// A name for displays ("drone 1").
@@ -274,6 +287,17 @@ pub struct DroneConfig {
     pub camera_timeout_s: f64,
     /// A goal reached within this distance, metres (returning home).
     pub home_reach_m: f64,
+    /// Told to land while moving, a drone with a pose first brakes to a stop on its position
+    /// controller, for at most this long, and only then sends LAND: a vehicle's land mode with
+    /// no position of its own (the shield's Naza in ATTI, an autopilot indoors) descends while
+    /// it coasts on, into whatever wall lies ahead. Seconds.
+    pub land_brake_s: f64,
+    /// Slower than this, m/s, it is stopped: LAND goes out.
+    pub land_still_mps: f64,
+    /// While a vehicle whose land mode holds no position
+    /// ([`StartSequence::land_holds_position`]) descends, the station holds the spot on its
+    /// pose with roll and pitch.
+    pub steer_landing: bool,
     /// Send LAND again if the vehicle is still armed this long after it, seconds.
     pub land_retry_s: f64,
     /// A flying drone whose vehicle reports itself disarmed this long has landed on its own (its
@@ -366,6 +390,10 @@ impl Default for DroneConfig {
             battery_swap: None,
             camera_timeout_s: 5.0,
             home_reach_m: 0.3,
+            // From 0.8 m/s, the hold stops a drone in about a second.
+            land_brake_s: 3.0,
+            land_still_mps: 0.15,
+            steer_landing: true,
             land_retry_s: 20.0,
             disarmed_landed_s: 2.0,
         }
@@ -597,6 +625,13 @@ pub struct Drone {
     /// Half its camera's horizontal field of view, radians, from the last frame's intrinsics
     /// (none yet: the look around assumes [`DroneConfig::sweep`]'s).
     camera_half_fov: Option<f64>,
+    /// Landing, LAND is still to be sent: it brakes to a stop first
+    /// ([`DroneConfig::land_brake_s`])…
+    land_due: bool,
+    /// …since when (mission time).
+    braking_since: Option<f64>,
+    /// Landing on the LAND this station sent (not by its vehicle's own failsafe).
+    land_sent: bool,
     /// When the last LAND was sent (mission time), while landing.
     landing_since: Option<f64>,
     last_tick: Option<f64>,
@@ -695,6 +730,9 @@ impl Drone {
             last_frame: None,
             camera_half_fov: None,
             disarmed_since: None,
+            land_due: false,
+            braking_since: None,
+            land_sent: false,
             landing_since: None,
             last_tick: None,
             heading_taken: None,
@@ -844,17 +882,83 @@ impl Drone {
         true
     }
 
-    /// Lands where it is (the vehicle lands and disarms by itself).
+    /// Lands where it is (the vehicle lands and disarms by itself): braked to a stop first if
+    /// it has a pose and is moving ([`DroneConfig::land_brake_s`]; its next tick decides),
+    /// then LAND.
     pub fn land(&mut self) {
         if matches!(self.phase, Phase::Landed | Phase::Landing | Phase::Idle) {
             return;
         }
-        self.set_sticks(Sticks::CENTRED);
         self.set_path(vec![]);
         self.goal = None;
+        self.scan = None;
+        let e = self.ekf.estimate();
+        self.hold = [e.position[0], e.position[1]];
+        self.yaw_goal = e.attitude[2];
         self.phase = Phase::Landing;
+        self.braking_since = None;
         self.landing_since = None;
-        self.send(Command::Land);
+        // Without a pose it cannot brake on one: LAND at once.
+        self.land_due = self.pose().is_some();
+        self.land_sent = !self.land_due;
+        if !self.land_due {
+            self.set_sticks(Sticks::CENTRED);
+            self.send(Command::Land);
+        }
+    }
+
+    /// One tick of a landing: it brakes to a stop before its LAND goes out, then sends it
+    /// again while the vehicle stays armed, and notes when it is down. Whether it is flown this
+    /// tick, as a hold of the spot where it was told to land: while it brakes, and as it
+    /// descends if its land mode holds no position ([`DroneConfig::steer_landing`]).
+    fn landing_step(&mut self, now: f64, telemetry: &Telemetry, config: &DroneConfig) -> bool {
+        if telemetry.armed == Some(false) {
+            self.phase = Phase::Landed;
+            self.land_due = false;
+            self.land_sent = false;
+            self.link.set_sticks(None);
+            self.sticks = None;
+            self.say(if self.awaits_battery {
+                "landed: waiting for a charged battery to rejoin".into()
+            } else {
+                "landed".into()
+            });
+            return false;
+        }
+        if self.land_due {
+            let since = *self.braking_since.get_or_insert(now);
+            // (A vehicle already in its land mode lands on its own: no stick may move it.)
+            let moving = self.pose().is_some()
+                && telemetry.mode.as_deref() != Some("LAND")
+                && self
+                    .ekf
+                    .valid_velocity()
+                    .is_some_and(|[vx, vy]| vx.hypot(vy) >= config.land_still_mps);
+            if moving && now - since < config.land_brake_s {
+                return true;
+            }
+            self.land_due = false;
+            self.land_sent = true;
+            self.set_sticks(Sticks::CENTRED);
+            self.landing_since = Some(now);
+            self.send(Command::Land);
+        } else if self.pending.is_none()
+            && now - *self.landing_since.get_or_insert(now) > config.land_retry_s
+        {
+            // Still armed long after the command: it may never have arrived. Again.
+            self.say(format!(
+                "still armed {:.0} s after LAND: sending it again",
+                config.land_retry_s
+            ));
+            self.landing_since = Some(now);
+            self.send(Command::Land);
+        }
+        // Coming down: held on its pose where its land mode holds nothing (and nothing it
+        // does not command: a vehicle landing on its own, by its failsafe, is left to it).
+        config.steer_landing
+            && !self.start_sequence.land_holds_position()
+            && self.land_sent
+            && self.pose().is_some()
     }
 
     /// Flies home and lands there (or lands where it is if its start is unknown).
@@ -1272,6 +1376,8 @@ impl Drone {
                 Phase::Exploring
             } else if telemetry.armed == Some(true) {
                 self.say("link back: the vehicle is landing by its failsafe".into());
+                self.land_due = false;
+                self.land_sent = false;
                 Phase::Landing
             } else {
                 self.say("link back: the vehicle is on the ground".into());
@@ -1295,6 +1401,7 @@ impl Drone {
                 self.leave_mission("its vehicle landed it (LAND mode)");
                 self.set_sticks(Sticks::CENTRED); // no stick may reposition it
                 self.phase = Phase::Landing;
+                self.land_sent = false;
                 self.goal = None;
                 self.set_path(vec![]);
                 self.landing_since = Some(now);
@@ -1319,27 +1426,9 @@ impl Drone {
                 return None;
             }
             Phase::Landing => {
-                if telemetry.armed == Some(false) {
-                    self.phase = Phase::Landed;
-                    self.link.set_sticks(None);
-                    self.sticks = None;
-                    self.say(if self.awaits_battery {
-                        "landed: waiting for a charged battery to rejoin".into()
-                    } else {
-                        "landed".into()
-                    });
-                } else if self.pending.is_none()
-                    && now - *self.landing_since.get_or_insert(now) > config.land_retry_s
-                {
-                    // Still armed long after the command: it may never have arrived. Again.
-                    self.say(format!(
-                        "still armed {:.0} s after LAND: sending it again",
-                        config.land_retry_s
-                    ));
-                    self.landing_since = Some(now);
-                    self.send(Command::Land);
+                if !self.landing_step(now, &telemetry, config) {
+                    return None;
                 }
-                return None;
             }
             Phase::TakingOff | Phase::Exploring | Phase::Holding | Phase::Returning => {}
         }
@@ -1448,7 +1537,8 @@ impl Drone {
                 }
                 self.follow(pose);
             }
-            Phase::Holding => {}
+            // Braking before LAND: held where it was told to land.
+            Phase::Holding | Phase::Landing => {}
             _ => return None,
         }
         self.setpoint = match &self.map {
@@ -1510,8 +1600,10 @@ impl Drone {
             c.pitch = (c.pitch + co * bx + s * by).clamp(-1.0, 1.0);
             c.roll = (c.roll + s * bx - co * by).clamp(-1.0, 1.0);
         }
-        // Near a wall the controller flies even a small error: its derivative term brakes.
+        // Near a wall the controller flies even a small error: its derivative term brakes; so
+        // does a drone braking to land (it is still moving).
         if !self.tracking
+            && !self.land_due
             && self.setpoint == self.hold
             && (setpoint.x - estimate.x).hypot(setpoint.y - estimate.y) < config.hold_band_m
         {
@@ -1527,6 +1619,9 @@ impl Drone {
             });
             let [sx, sy] = if self.tracking {
                 brake_to_speed(velocity, self.speed_limit, &config.keep_clear)
+            } else if self.land_due {
+                // Braking to land: to a stop, as hard as for a wall.
+                brake_to_speed(velocity, 0.0, &config.keep_clear)
             } else {
                 [0.0; 2]
             };
@@ -1538,6 +1633,11 @@ impl Drone {
         }
         if sweep {
             c.yaw = f64::from(self.sweep_yaw(config));
+        }
+        if self.land_sent {
+            // Held on its pose as it comes down: the descent is the shield's own (it keeps the
+            // throttle), and the filter predicts it from the stick it holds.
+            c.throttle = f64::from(link::shield::LAND_THROTTLE);
         }
         self.set_sticks(Sticks {
             roll: c.roll as f32,
@@ -3545,6 +3645,115 @@ mod tests {
         drone.return_home("no camera frame for 5 s");
         drone.land();
         assert_eq!(drone.left_mission.as_deref(), Some("battery at 24 %"));
+    }
+
+    /// The simulator's vehicle flying its path east down a corridor at its cruise speed, in a
+    /// 0.15 m/s draught the same way, 1.1 m short of the corridor's end wall when it is told to
+    /// land; its pose from the truth at 10 Hz. Once the station sends LAND, it descends as the
+    /// shield lands a Naza: its own slow throttle, the station's roll, pitch and yaw. Its speed
+    /// when told, where it touched down (metres east of where it was told) and how often it
+    /// touched a wall.
+    fn land_from_a_flight(config: &DroneConfig) -> (f64, f64, u32) {
+        let vehicle_link = Arc::new(StubbornVehicle::default());
+        // Corridor x 0.25–6.25 m, y 0.25–2.25 m (walls round it), 0.25 m cells.
+        let mut text = String::from("resolution 0.25\nceiling 3.0\n---\n");
+        for row in 0..10 {
+            let wall = row == 0 || row == 9;
+            text += &format!("#{}#\n", if wall { "#" } else { "." }.repeat(24));
+        }
+        let world = sitl::world::World::parse_text("corridor", &text).expect("a corridor");
+        let (told_x, y) = (6.25 - 1.1, 1.25);
+        let mut vehicle = sitl::vehicle::Vehicle::new(Default::default(), 1.0, y, 0.0);
+        let mut drone = Drone::new(
+            0,
+            DroneSpec {
+                name: "drone 1".into(),
+                link: vehicle_link.clone(),
+                start_sequence: StartSequence::Shield,
+                altitude: 0.9,
+                start: Some([1.0, y, 0.0]),
+            },
+            config,
+            0.0,
+        );
+        drone.phase = Phase::Exploring;
+        drone.set_map(Arc::new(world.to_grid()));
+        vehicle.set_armed(true);
+        vehicle.set_wind([0.15, 0.0]);
+        let mut t = 0.0;
+        // A tenth of a second: the station's tick, the vehicle flying its sticks, a fix.
+        let mut fly = |vehicle: &mut sitl::vehicle::Vehicle, drone: &mut Drone, t: &mut f64| {
+            for _ in 0..10 {
+                vehicle.step(&world, 0.01);
+            }
+            *t += 0.1;
+            let s = vehicle.state();
+            *vehicle_link.yaw.lock().expect("yaw") = Some(s.yaw as f32);
+            drone.slam_fix(*t, s.position, s.yaw, Some(100), false);
+            drone.tick(*t, config);
+        };
+        // Up to its band (where the link's telemetry reads it)…
+        vehicle.set_sticks(Sticks {
+            throttle: 1.0,
+            ..Sticks::CENTRED
+        });
+        while vehicle.state().position[2] < 0.9 {
+            fly(&mut vehicle, &mut drone, &mut t);
+        }
+        // …then along its path to the far end, until it passes the spot where it is told.
+        drone.set_plan(Some([5.9, y]), vec![[1.0, y], [5.9, y]], None, t);
+        while vehicle.state().position[0] < told_x {
+            vehicle.set_sticks(drone.sticks.expect("sticks"));
+            fly(&mut vehicle, &mut drone, &mut t);
+            assert!(t < 60.0, "never got there");
+        }
+        let speed = vehicle.state().velocity[0];
+        drone.land();
+        let told = vehicle.state().position[0];
+        while drone.land_due {
+            vehicle.set_sticks(drone.sticks.expect("sticks while braking"));
+            fly(&mut vehicle, &mut drone, &mut t);
+            assert!(t < 60.0, "LAND never sent");
+        }
+        let braked = t - drone.braking_since.unwrap_or(t);
+        assert!(
+            braked <= config.land_brake_s + 0.15,
+            "braked for {braked:.1} s"
+        );
+        while !vehicle.state().landed {
+            vehicle.set_sticks(Sticks {
+                throttle: link::shield::LAND_THROTTLE,
+                ..drone.sticks.expect("sticks")
+            });
+            fly(&mut vehicle, &mut drone, &mut t);
+            assert!(t < 60.0, "never landed");
+        }
+        let s = vehicle.state();
+        (speed, s.position[0] - told, s.collisions)
+    }
+
+    #[test]
+    fn a_drone_told_to_land_in_flight_stops_first_and_is_held_there_as_it_comes_down() {
+        let config = DroneConfig::default();
+        let (speed, past, collisions) = land_from_a_flight(&config);
+        assert!(speed > 0.6, "told at {speed:.2} m/s");
+        assert_eq!(
+            collisions, 0,
+            "touched a wall, {past:.2} m past where it was told"
+        );
+        assert!(past < 0.3, "landed {past:.2} m past where it was told");
+        // Landing at once with its sticks left centred, it coasts on down into the wall (the
+        // shield's seed 6, stop 79).
+        let at_once = DroneConfig {
+            land_brake_s: 0.0,
+            steer_landing: false,
+            ..config
+        };
+        let (_, coasted, collisions) = land_from_a_flight(&at_once);
+        assert!(
+            collisions > 0 && coasted > 0.8,
+            "at once: {coasted:.2} m on, {collisions} touches"
+        );
     }
 
     #[test]

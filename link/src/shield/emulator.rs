@@ -171,11 +171,17 @@ impl ShieldEmulator {
     fn execute(&mut self, event: Event, now: Duration) {
         match event {
             Event::Dropped(_) => {}
-            Event::Pulses(p) => {
-                if !self.flags.landing {
-                    self.apply(p); // while landing, the landing owns the outputs
-                }
-            }
+            Event::Pulses(p) => match (self.flags.landing, self.flags.failsafe, self.outputs) {
+                (false, _, _) => self.apply(p),
+                // A commanded landing owns the throttle (its slow descent); roll, pitch and yaw
+                // still pass, so the station can hold the drone's position as it comes down.
+                (true, false, Some(landing)) => self.apply(Pulses {
+                    throttle: landing.throttle,
+                    ..p
+                }),
+                // A failsafe landing owns every output.
+                (true, true, _) | (true, false, None) => {}
+            },
             Event::Special { action, seq } => {
                 let slot = usize::from(action.id() - 4);
                 let repeat = self.last_seq[slot] == Some(seq);
@@ -249,7 +255,7 @@ impl ShieldEmulator {
         self.landing_since = Some(now);
         UpRepr::Text(why.into()).emit(&mut self.upstream);
         let descend = self.config.channel_map.pulses(&Sticks {
-            throttle: -0.3,
+            throttle: super::LAND_THROTTLE,
             ..Sticks::CENTRED
         });
         self.apply(descend);
@@ -556,6 +562,38 @@ mod tests {
         assert!(em.flags().armed);
         em.tick(ms(3100));
         assert!(!em.flags().armed && !em.flags().landing);
+    }
+
+    #[test]
+    fn a_commanded_landing_keeps_its_descent_and_lets_the_station_steer() {
+        let mut em = ShieldEmulator::new(EmulatorConfig::default());
+        em.set_sensors(Sensors {
+            sonar_mm: Some(800),
+            ..Sensors::default()
+        });
+        em.receive(&special(Special::Arm, 1), ms(0));
+        em.receive(&special(Special::Start, 2), ms(10));
+        em.receive(&special(Special::Land, 3), ms(20));
+        assert!(em.flags().landing && !em.flags().failsafe);
+        let descent = em.outputs().unwrap();
+        let mut pkt = [0u8; 8];
+        let steer = Pulses {
+            roll: 1400,
+            pitch: 1620,
+            yaw: 1480,
+            throttle: 1900,
+        };
+        RpytRepr(steer).emit(&mut pkt).unwrap();
+        em.receive(&pkt, ms(100));
+        // Roll, pitch and yaw as sent; the throttle is still the landing's, not the climb sent.
+        assert_eq!(
+            em.outputs(),
+            Some(Pulses {
+                throttle: descent.throttle,
+                ..steer
+            })
+        );
+        assert!(em.flags().landing);
     }
 
     #[test]
