@@ -3717,7 +3717,7 @@ mod tests {
         vehicle.set_wind([0.15, 0.0]);
         let mut t = 0.0;
         // A tenth of a second: the station's tick, the vehicle flying its sticks, a fix.
-        let mut fly = |vehicle: &mut sitl::vehicle::Vehicle, drone: &mut Drone, t: &mut f64| {
+        let fly = |vehicle: &mut sitl::vehicle::Vehicle, drone: &mut Drone, t: &mut f64| {
             for _ in 0..10 {
                 vehicle.step(&world, 0.01);
             }
