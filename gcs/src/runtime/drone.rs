@@ -182,9 +182,6 @@ pub struct DroneConfig {
     /// (ALT_HOLD, the mode flown, has no position hold of its own: a real drift this small
     /// goes unbraked until it passes the band.)
     pub hold_band_m: f64,
-    /// …unless the filter has it moving this fast or faster, m/s: a drone coasting into its
-    /// hold is braked (the sticks centred at 0.5 m/s, it coasts on 0.8 m).
-    pub hold_band_still_mps: f64,
     /// The position setpoint never leads toward a wall of the map nearer than the clearance to
     /// the drone's centre, leads back out to it, and leads less far near walls
     /// ([`nav::avoid::keep_clear`]).
@@ -348,7 +345,6 @@ impl Default for DroneConfig {
             cruise_ff: 0.175,
             ekf: EkfConfig::default(),
             hold_band_m: 0.1,
-            hold_band_still_mps: 0.2,
             keep_clear: KeepClear::default(),
             hold_clearance_m: 0.55,
             plan_position_sigma_m: 1.0,
@@ -1605,14 +1601,9 @@ impl Drone {
             c.roll = (c.roll + s * bx - co * by).clamp(-1.0, 1.0);
         }
         // Near a wall the controller flies even a small error: its derivative term brakes; so
-        // does a drone moving (coasting into its hold, braking to land).
-        let still = self
-            .ekf
-            .valid_velocity()
-            .is_none_or(|[vx, vy]| vx.hypot(vy) < config.hold_band_still_mps);
+        // does a drone braking to land (it is still moving).
         if !self.tracking
             && !self.land_due
-            && still
             && self.setpoint == self.hold
             && (setpoint.x - estimate.x).hypot(setpoint.y - estimate.y) < config.hold_band_m
         {
@@ -2235,32 +2226,6 @@ mod tests {
             s.pitch > 0.0 && s.roll.abs() < 0.05 * s.pitch,
             "forward, to +x: {s:?}"
         );
-    }
-
-    #[test]
-    fn a_drone_coasting_into_its_hold_is_braked_within_the_band() {
-        // Seed 255 (stop 80): a drone reaching the spot of a look around at 0.5 m/s had its
-        // sticks centred there, within the band, and coasted on into the wall beside it.
-        let config = DroneConfig::default();
-        let mut drone = exploring_drone(Arc::default(), &config);
-        drone.scan = Some(Scan::new(0.0, 0.0, None, &config));
-        drone.hold = [0.0, 0.0];
-        // East at 0.5 m/s, from 0.35 m short of its hold, until the filter has it within the
-        // band.
-        let mut t = 0.0;
-        loop {
-            t += 0.1;
-            drone.slam_fix(t, [-0.35 + 0.5 * t, 0.0, 0.9], 0.0, None, false);
-            drone.tick(t, &config);
-            if drone.ekf.estimate().position[0] > -config.hold_band_m {
-                break;
-            }
-            assert!(t < 1.0, "never within the band");
-        }
-        let v = drone.ekf.valid_velocity().expect("a velocity");
-        assert!(v[0] > config.hold_band_still_mps, "still moving: {v:?}");
-        let s = drone.sticks.expect("sticks");
-        assert!(s.pitch < -0.1, "braked against +x: {s:?}");
     }
 
     #[test]
