@@ -83,9 +83,10 @@ pub enum StartSequence {
 
 impl StartSequence {
     /// Whether the vehicle's own land mode holds its position as it descends: an autopilot's
-    /// LAND does; the shield's land only centres the sticks (the Naza in ATTI drifts with
-    /// whatever speed and draught it has), but lets the station's roll and pitch through
-    /// ([`DroneConfig::steer_landing`]).
+    /// LAND is left to it (it holds where it has a position of its own, as the simulated one
+    /// always does, and takes roll and pitch only as a pilot's repositioning); the shield's
+    /// land only centres the sticks (the Naza in ATTI drifts with whatever speed and draught
+    /// it has), but lets the station's roll and pitch through ([`DroneConfig::steer_landing`]).
     pub fn land_holds_position(self) -> bool {
         match self {
             StartSequence::Mavlink => true,
