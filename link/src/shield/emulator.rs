@@ -485,6 +485,12 @@ mod tests {
         crate::shield::wire::special_bytes(action, seq).unwrap()
     }
 
+    fn rpyt(pulses: Pulses) -> [u8; 8] {
+        let mut pkt = [0u8; 8];
+        RpytRepr(pulses).emit(&mut pkt).unwrap();
+        pkt
+    }
+
     fn acks(em: &mut ShieldEmulator) -> Vec<AckRepr> {
         let mut out = vec![];
         FrameDecoder::new().push(&em.take_upstream(), &mut out);
@@ -499,15 +505,13 @@ mod tests {
     #[test]
     fn rpyt_sets_outputs_and_specials_are_acked_once() {
         let mut em = ShieldEmulator::new(EmulatorConfig::default());
-        let mut pkt = [0u8; 8];
         let p = Pulses {
             roll: 1400,
             pitch: 1600,
             yaw: 1500,
             throttle: 1900,
         };
-        RpytRepr(p).emit(&mut pkt).unwrap();
-        em.receive(&pkt, ms(0));
+        em.receive(&rpyt(p), ms(0));
         assert_eq!(em.outputs(), Some(p));
         em.receive(&special(Special::Start, 1), ms(10));
         assert_eq!(
@@ -543,16 +547,13 @@ mod tests {
         let throttle = em.config.channel_map.sticks(&out).throttle;
         assert!((throttle + 0.3).abs() <= 1.0 / 475.0, "{throttle}");
         // New sticks do not override the landing.
-        let mut pkt = [0u8; 8];
-        RpytRepr(Pulses {
+        let all_low = Pulses {
             roll: 1000,
             pitch: 1000,
             yaw: 1000,
             throttle: 1000,
-        })
-        .emit(&mut pkt)
-        .unwrap();
-        em.receive(&pkt, ms(1100));
+        };
+        em.receive(&rpyt(all_low), ms(1100));
         assert_eq!(em.outputs(), Some(out));
         em.set_sensors(Sensors {
             sonar_mm: Some(50),
@@ -576,15 +577,13 @@ mod tests {
         em.receive(&special(Special::Land, 3), ms(20));
         assert!(em.flags().landing && !em.flags().failsafe);
         let descent = em.outputs().unwrap();
-        let mut pkt = [0u8; 8];
         let steer = Pulses {
             roll: 1400,
             pitch: 1620,
             yaw: 1480,
             throttle: 1900,
         };
-        RpytRepr(steer).emit(&mut pkt).unwrap();
-        em.receive(&pkt, ms(100));
+        em.receive(&rpyt(steer), ms(100));
         // Roll, pitch and yaw as sent; the throttle is still the landing's, not the climb sent.
         assert_eq!(
             em.outputs(),
