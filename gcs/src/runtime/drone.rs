@@ -419,6 +419,25 @@ impl Default for BatterySwap {
     }
 }
 
+/// Whose landing a drone's is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum LandingBy {
+    /// The station's, still braking to a stop before it sends LAND
+    /// ([`DroneConfig::land_brake_s`]), since when (mission time, from its first tick).
+    Braking(Option<f64>),
+    /// The station's, on the LAND it sent.
+    Station,
+    /// The vehicle's own (its land mode, its failsafe).
+    Vehicle,
+}
+
+impl LandingBy {
+    /// Whether it still brakes before LAND.
+    fn braking(self) -> bool {
+        matches!(self, LandingBy::Braking(_))
+    }
+}
+
 /// What the position controller flies to: the carrot of one of the drone's paths (counted),
 /// or a spot held.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -626,13 +645,8 @@ pub struct Drone {
     /// Half its camera's horizontal field of view, radians, from the last frame's intrinsics
     /// (none yet: the look around assumes [`DroneConfig::sweep`]'s).
     camera_half_fov: Option<f64>,
-    /// Landing, LAND is still to be sent: it brakes to a stop first
-    /// ([`DroneConfig::land_brake_s`])…
-    land_due: bool,
-    /// …since when (mission time).
-    braking_since: Option<f64>,
-    /// Landing on the LAND this station sent (not by its vehicle's own failsafe).
-    land_sent: bool,
+    /// Whose landing it is, while landing.
+    landing_by: LandingBy,
     /// When the last LAND was sent (mission time), while landing.
     landing_since: Option<f64>,
     last_tick: Option<f64>,
@@ -731,9 +745,7 @@ impl Drone {
             last_frame: None,
             camera_half_fov: None,
             disarmed_since: None,
-            land_due: false,
-            braking_since: None,
-            land_sent: false,
+            landing_by: LandingBy::Vehicle,
             landing_since: None,
             last_tick: None,
             heading_taken: None,
@@ -897,12 +909,12 @@ impl Drone {
         self.hold = [e.position[0], e.position[1]];
         self.yaw_goal = e.attitude[2];
         self.phase = Phase::Landing;
-        self.braking_since = None;
         self.landing_since = None;
         // Without a pose it cannot brake on one: LAND at once.
-        self.land_due = self.pose().is_some();
-        self.land_sent = !self.land_due;
-        if !self.land_due {
+        if self.pose().is_some() {
+            self.landing_by = LandingBy::Braking(None);
+        } else {
+            self.landing_by = LandingBy::Station;
             self.set_sticks(Sticks::CENTRED);
             self.send(Command::Land);
         }
@@ -915,8 +927,7 @@ impl Drone {
     fn landing_step(&mut self, now: f64, telemetry: &Telemetry, config: &DroneConfig) -> bool {
         if telemetry.armed == Some(false) {
             self.phase = Phase::Landed;
-            self.land_due = false;
-            self.land_sent = false;
+            self.landing_by = LandingBy::Vehicle;
             self.link.set_sticks(None);
             self.sticks = None;
             self.say(if self.awaits_battery {
@@ -926,8 +937,8 @@ impl Drone {
             });
             return false;
         }
-        if self.land_due {
-            let since = *self.braking_since.get_or_insert(now);
+        if let LandingBy::Braking(since) = &mut self.landing_by {
+            let since = *since.get_or_insert(now);
             // (A vehicle already in its land mode lands on its own: no stick may move it.)
             let moving = self.pose().is_some()
                 && telemetry.mode.as_deref() != Some("LAND")
@@ -938,8 +949,7 @@ impl Drone {
             if moving && now - since < config.land_brake_s {
                 return true;
             }
-            self.land_due = false;
-            self.land_sent = true;
+            self.landing_by = LandingBy::Station;
             self.set_sticks(Sticks::CENTRED);
             self.landing_since = Some(now);
             self.send(Command::Land);
@@ -958,7 +968,7 @@ impl Drone {
         // does not command: a vehicle landing on its own, by its failsafe, is left to it).
         config.steer_landing
             && !self.start_sequence.land_holds_position()
-            && self.land_sent
+            && self.landing_by == LandingBy::Station
             && self.pose().is_some()
     }
 
@@ -1377,8 +1387,7 @@ impl Drone {
                 Phase::Exploring
             } else if telemetry.armed == Some(true) {
                 self.say("link back: the vehicle is landing by its failsafe".into());
-                self.land_due = false;
-                self.land_sent = false;
+                self.landing_by = LandingBy::Vehicle;
                 Phase::Landing
             } else {
                 self.say("link back: the vehicle is on the ground".into());
@@ -1402,7 +1411,7 @@ impl Drone {
                 self.leave_mission("its vehicle landed it (LAND mode)");
                 self.set_sticks(Sticks::CENTRED); // no stick may reposition it
                 self.phase = Phase::Landing;
-                self.land_sent = false;
+                self.landing_by = LandingBy::Vehicle;
                 self.goal = None;
                 self.set_path(vec![]);
                 self.landing_since = Some(now);
@@ -1604,7 +1613,7 @@ impl Drone {
         // Near a wall the controller flies even a small error: its derivative term brakes; so
         // does a drone braking to land (it is still moving).
         if !self.tracking
-            && !self.land_due
+            && !self.landing_by.braking()
             && self.setpoint == self.hold
             && (setpoint.x - estimate.x).hypot(setpoint.y - estimate.y) < config.hold_band_m
         {
@@ -1620,7 +1629,7 @@ impl Drone {
             });
             let [sx, sy] = if self.tracking {
                 brake_to_speed(velocity, self.speed_limit, &config.keep_clear)
-            } else if self.land_due {
+            } else if self.landing_by.braking() {
                 // Braking to land: to a stop, as hard as for a wall.
                 brake_to_speed(velocity, 0.0, &config.keep_clear)
             } else {
@@ -1635,7 +1644,7 @@ impl Drone {
         if sweep {
             c.yaw = f64::from(self.sweep_yaw(config));
         }
-        if self.land_sent {
+        if self.landing_by == LandingBy::Station {
             // Held on its pose as it comes down: the descent is the shield's own (it keeps the
             // throttle), and the filter predicts it from the stick it holds.
             c.throttle = f64::from(link::shield::LAND_THROTTLE);
@@ -3710,13 +3719,14 @@ mod tests {
         }
         let speed = vehicle.state().velocity[0];
         drone.land();
-        let told = vehicle.state().position[0];
-        while drone.land_due {
+        let (told, told_at) = (vehicle.state().position[0], t);
+        while drone.landing_by.braking() {
             vehicle.set_sticks(drone.sticks.expect("sticks while braking"));
             fly(&mut vehicle, &mut drone, &mut t);
             assert!(t < 60.0, "LAND never sent");
         }
-        let braked = t - drone.braking_since.unwrap_or(t);
+        // (Its braking clock starts at the tick after it was told, 0.1 s on.)
+        let braked = t - told_at - 0.1;
         assert!(
             braked <= config.land_brake_s + 0.15,
             "braked for {braked:.1} s"
