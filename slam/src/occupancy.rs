@@ -5,7 +5,8 @@
 //! evidence of free space, the voxel it ends in evidence of an obstacle (OctoMap's sensor model,
 //! clamped so the map stays responsive). The projection keeps only the band between
 //! `occupancy_min_z` and `occupancy_max_z`, so the floor and the ceiling — which the camera sees
-//! everywhere — do not become walls ("pancaking", thesis 000 §5.4). Voxels live in 8×8×8 chunks
+//! everywhere — do not become walls ("pancaking", thesis 000 §5.4); free space is taken from
+//! lower down (`free_min_z`), where a ray to the floor still crosses open air. Voxels live in 8×8×8 chunks
 //! in a hash map, so memory grows with the space observed, not with the building's bounding box.
 
 use std::collections::HashMap;
@@ -32,8 +33,15 @@ pub struct OccupancyConfig {
     pub pixel_step: usize,
     /// Depth readings beyond this are ignored, metres.
     pub max_range: f64,
-    /// Lowest height projected to the 2D grid, metres.
+    /// Lowest height projected to the 2D grid as a wall, metres.
     pub occupancy_min_z: f64,
+    /// Lowest height whose free voxels make a 2D cell free, metres (at most
+    /// `occupancy_min_z`). A ray to the floor is free space only where it passes through the
+    /// band: from a camera at height h, the first (h − min) / h of its length, so the lower
+    /// this is, the farther each view maps the floor free. Walls are taken from higher up: a
+    /// pose a degree or two off in pitch lifts the floor 4 m away into the band, and walls
+    /// taken from as low made phantom walls on SLAM poses (stop 81).
+    pub free_min_z: f64,
     /// Highest height projected to the 2D grid, metres.
     pub occupancy_max_z: f64,
     /// A 2D cell is occupied when at least this many voxels of its column within the band are
@@ -52,6 +60,8 @@ impl Default for OccupancyConfig {
             pixel_step: 4,
             max_range: 4.0,
             occupancy_min_z: 0.3,
+            // A lone drone at 0.6 m explored 7 % faster than with free space taken from 0.3 m.
+            free_min_z: 0.1,
             occupancy_max_z: 2.0,
             occupied_min_voxels: 2,
         }
@@ -308,15 +318,17 @@ impl VoxelMap {
     }
 
     /// The 2D ternary grid of the band `occupancy_min_z..occupancy_max_z`: a column is occupied
-    /// if any voxel in the band is, free if none is and some voxel in it was seen free, unknown
-    /// otherwise. `None` while nothing has been observed.
+    /// if `occupied_min_voxels` voxels in the band are, free if not and some voxel in it (or
+    /// down to `free_min_z`) was seen free, unknown otherwise. `None` while nothing has been
+    /// observed.
     pub fn project(&self) -> Option<Grid> {
         let r = self.config.resolution;
         let z0 = (self.config.occupancy_min_z / r).floor() as i32;
+        let z_free = (self.config.free_min_z / r).floor().min(f64::from(z0)) as i32;
         let z1 = (self.config.occupancy_max_z / r).ceil() as i32 - 1;
         let (mut lo, mut hi) = ([i32::MAX; 2], [i32::MIN; 2]);
         for (key, _) in &self.chunks {
-            if key[2] * CHUNK > z1 || (key[2] + 1) * CHUNK <= z0 {
+            if key[2] * CHUNK > z1 || (key[2] + 1) * CHUNK <= z_free {
                 continue;
             }
             for k in 0..2 {
@@ -335,14 +347,14 @@ impl VoxelMap {
         for (key, c) in &self.chunks {
             for (i, l) in c.iter().enumerate() {
                 let v = join(*key, i);
-                if v[2] < z0 || v[2] > z1 || *l == 0.0 {
+                if v[2] < z_free || v[2] > z1 || *l == 0.0 {
                     continue;
                 }
                 let cell = (v[1] - lo[1]) as usize * w + (v[0] - lo[0]) as usize;
-                if *l > 0.0 {
-                    occupied[cell] = occupied[cell].saturating_add(1);
-                } else {
+                if *l < 0.0 {
                     free[cell] = true;
+                } else if v[2] >= z0 {
+                    occupied[cell] = occupied[cell].saturating_add(1);
                 }
             }
         }
@@ -467,6 +479,12 @@ mod tests {
 
     /// A camera at (0, 0, 0.5) looking along +x at a wall 2 m away, above a floor.
     fn wall_and_floor() -> (Vec<u16>, Isometry3<f64>) {
+        floor_view(0.5, 2.0)
+    }
+
+    /// A camera at (0, 0, `height`) looking along +x at a wall `wall` metres away (infinite:
+    /// none; a reading beyond 65 m is none), above a floor; 64×48 pixels, fx = fy = 52.5.
+    fn floor_view(height: f64, wall: f64) -> (Vec<u16>, Isometry3<f64>) {
         let (w, h) = (64usize, 48usize);
         let (fx, cy) = (52.5, 23.5);
         let mut depth = vec![0u16; w * h];
@@ -474,11 +492,9 @@ mod tests {
             for u in 0..w {
                 // The ray's direction in the camera: ((u−cx)/fx, (v−cy)/fy, 1); y down.
                 let dy = (v as f64 - cy) / fx;
-                // Wall at forward distance 2; floor 0.5 m below the camera.
-                let z_wall: f64 = 2.0;
-                let z_floor = if dy > 0.0 { 0.5 / dy } else { f64::INFINITY };
-                let z = z_wall.min(z_floor);
-                depth[v * w + u] = (z * 1000.0) as u16;
+                let z_floor = if dy > 0.0 { height / dy } else { f64::INFINITY };
+                let z = wall.min(z_floor);
+                depth[v * w + u] = if z < 65.0 { (z * 1000.0) as u16 } else { 0 };
             }
         }
         let body_from_camera = UnitQuaternion::from_matrix(&Matrix3::new(
@@ -486,8 +502,76 @@ mod tests {
         ));
         (
             depth,
-            Isometry3::from_parts(Translation3::new(0.0, 0.0, 0.5), body_from_camera),
+            Isometry3::from_parts(Translation3::new(0.0, 0.0, height), body_from_camera),
         )
+    }
+
+    #[test]
+    fn a_view_of_the_open_floor_maps_it_free_most_of_the_way_out() {
+        // From 0.6 m (drone 1's default band) the floor is in view from 1.3 m out, and read
+        // to 3.7 m here. A ray to it is free space while it passes through the band.
+        let config = OccupancyConfig {
+            pixel_step: 1,
+            ..OccupancyConfig::default()
+        };
+        let height = 0.6;
+        let (depth, pose) = floor_view(height, f64::INFINITY);
+        let mut m = VoxelMap::new(config.clone());
+        let image = DepthImage {
+            width: 64,
+            height: 48,
+            depth: &depth,
+            depth_scale: 0.001,
+            intrinsics: [52.5, 52.5, 31.5, 23.5],
+        };
+        m.insert_depth(&image, &pose);
+        let g = m.project().expect("something seen");
+        let cells = (0..g.height()).flat_map(|y| (0..g.width()).map(move |x| (x, y)));
+        let free_out = cells
+            .clone()
+            .filter(|c| g.get(*c) == Cell::Free)
+            .map(|c| g.center_of(c)[0])
+            .fold(0.0, f64::max);
+        let through_band = (height - config.free_min_z) / height;
+        // The farthest reading of the floor (the camera looks level: its depth is how far out).
+        let farthest = depth
+            .iter()
+            .map(|&d| f64::from(d) * 0.001)
+            .filter(|&d| d <= config.max_range)
+            .fold(0.0, f64::max);
+        assert!(farthest > 3.5, "{farthest}");
+        let reach = farthest * through_band;
+        assert!(
+            (free_out - reach).abs() < 0.15,
+            "free out to {free_out:.2} m, not {reach:.2} m"
+        );
+        // About 2.2 m with free space taken from where walls are.
+        assert!(free_out > 2.5, "{free_out:.2} m");
+        assert!(
+            cells.clone().all(|c| g.get(c) != Cell::Occupied),
+            "the floor became a wall"
+        );
+        // Inserted at a pose 3° off in pitch, the floor rises 0.21 m over the 4 m: free space
+        // still, not a wall, even where one voxel would make one.
+        let config = OccupancyConfig {
+            occupied_min_voxels: 1,
+            ..config
+        };
+        let nose_up = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), -3f64.to_radians());
+        let tilted = Isometry3::from_parts(pose.translation, nose_up * pose.rotation);
+        let mut m = VoxelMap::new(config.clone());
+        m.insert_depth(&image, &tilted);
+        let lifted = m.occupied().iter().map(|p| p[2]).fold(0.0, f64::max);
+        assert!(
+            lifted > config.free_min_z + 0.05,
+            "the floor lifted to {lifted:.2} m"
+        );
+        let g = m.project().expect("something seen");
+        let mut cells = (0..g.height()).flat_map(|y| (0..g.width()).map(move |x| (x, y)));
+        assert!(
+            cells.all(|c| g.get(c) != Cell::Occupied),
+            "the tilted floor became a wall"
+        );
     }
 
     #[test]
