@@ -6,8 +6,9 @@
 //! clamped so the map stays responsive). The projection keeps only the band between
 //! `occupancy_min_z` and `occupancy_max_z`, so the floor and the ceiling — which the camera sees
 //! everywhere — do not become walls ("pancaking", thesis 000 §5.4); free space is taken from
-//! lower down (`free_min_z`), where a ray to the floor still crosses open air. Voxels live in 8×8×8 chunks
-//! in a hash map, so memory grows with the space observed, not with the building's bounding box.
+//! lower down (`free_min_z`), where a ray to the floor still crosses open air. Voxels live in
+//! 8×8×8 chunks in a hash map, so memory grows with the space observed, not with the building's
+//! bounding box.
 
 use std::collections::HashMap;
 use std::io::{self, Write};
