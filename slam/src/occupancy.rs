@@ -507,6 +507,23 @@ mod tests {
         )
     }
 
+    /// `depth` as [`floor_view`] takes it: 64×48 pixels, fx = fy = 52.5, in millimetres.
+    fn view_image(depth: &[u16]) -> DepthImage<'_> {
+        DepthImage {
+            width: 64,
+            height: 48,
+            depth,
+            depth_scale: 0.001,
+            intrinsics: [52.5, 52.5, 31.5, 23.5],
+        }
+    }
+
+    /// Every cell of `g`.
+    fn all_cells(g: &Grid) -> impl Iterator<Item = (usize, usize)> {
+        let (w, h) = (g.width(), g.height());
+        (0..h).flat_map(move |y| (0..w).map(move |x| (x, y)))
+    }
+
     #[test]
     fn a_view_of_the_open_floor_maps_it_free_most_of_the_way_out() {
         // From 0.6 m (drone 1's default band) the floor is in view from 1.3 m out, and read
@@ -518,18 +535,10 @@ mod tests {
         let height = 0.6;
         let (depth, pose) = floor_view(height, f64::INFINITY);
         let mut m = VoxelMap::new(config.clone());
-        let image = DepthImage {
-            width: 64,
-            height: 48,
-            depth: &depth,
-            depth_scale: 0.001,
-            intrinsics: [52.5, 52.5, 31.5, 23.5],
-        };
+        let image = view_image(&depth);
         m.insert_depth(&image, &pose);
         let g = m.project().expect("something seen");
-        let cells = (0..g.height()).flat_map(|y| (0..g.width()).map(move |x| (x, y)));
-        let free_out = cells
-            .clone()
+        let free_out = all_cells(&g)
             .filter(|c| g.get(*c) == Cell::Free)
             .map(|c| g.center_of(c)[0])
             .fold(0.0, f64::max);
@@ -549,7 +558,7 @@ mod tests {
         // About 2.2 m with free space taken from where walls are.
         assert!(free_out > 2.5, "{free_out:.2} m");
         assert!(
-            cells.clone().all(|c| g.get(c) != Cell::Occupied),
+            all_cells(&g).all(|c| g.get(c) != Cell::Occupied),
             "the floor became a wall"
         );
         // Inserted at a pose 3° off in pitch, the floor rises 0.21 m over the 4 m: free space
@@ -568,9 +577,8 @@ mod tests {
             "the floor lifted to {lifted:.2} m"
         );
         let g = m.project().expect("something seen");
-        let mut cells = (0..g.height()).flat_map(|y| (0..g.width()).map(move |x| (x, y)));
         assert!(
-            cells.all(|c| g.get(c) != Cell::Occupied),
+            all_cells(&g).all(|c| g.get(c) != Cell::Occupied),
             "the tilted floor became a wall"
         );
     }
@@ -582,13 +590,7 @@ mod tests {
             pixel_step: 1,
             ..OccupancyConfig::default()
         });
-        let image = DepthImage {
-            width: 64,
-            height: 48,
-            depth: &depth,
-            depth_scale: 0.001,
-            intrinsics: [52.5, 52.5, 31.5, 23.5],
-        };
+        let image = view_image(&depth);
         assert_eq!(m.insert_depth(&image, &pose), 64 * 48);
         let g = m.project().expect("something seen");
         let at = |x: f64, y: f64| g.cell_of([x, y]).map(|c| g.get(c));
@@ -597,8 +599,7 @@ mod tests {
         assert_eq!(at(2.02, 0.0), Some(Cell::Occupied));
         assert_eq!(at(1.0, 0.0), Some(Cell::Free));
         assert_eq!(at(0.5, 0.1), Some(Cell::Free));
-        let occupied_before_wall = (0..g.height())
-            .flat_map(|y| (0..g.width()).map(move |x| (x, y)))
+        let occupied_before_wall = all_cells(&g)
             .filter(|c| g.get(*c) == Cell::Occupied && g.center_of(*c)[0] < 1.9)
             .count();
         assert_eq!(occupied_before_wall, 0, "the floor became a wall");
@@ -610,13 +611,7 @@ mod tests {
     fn invalid_pixels_and_bad_images_are_skipped() {
         let mut m = VoxelMap::new(OccupancyConfig::default());
         let zeros = vec![0u16; 64 * 48];
-        let image = DepthImage {
-            width: 64,
-            height: 48,
-            depth: &zeros,
-            depth_scale: 0.001,
-            intrinsics: [52.5, 52.5, 31.5, 23.5],
-        };
+        let image = view_image(&zeros);
         assert_eq!(m.insert_depth(&image, &Isometry3::identity()), 0);
         assert!(m.project().is_none());
         let short = DepthImage {
@@ -631,13 +626,7 @@ mod tests {
     fn ply_lists_the_occupied_voxels() {
         let (depth, pose) = wall_and_floor();
         let mut m = VoxelMap::new(OccupancyConfig::default());
-        let image = DepthImage {
-            width: 64,
-            height: 48,
-            depth: &depth,
-            depth_scale: 0.001,
-            intrinsics: [52.5, 52.5, 31.5, 23.5],
-        };
+        let image = view_image(&depth);
         m.insert_depth(&image, &pose);
         let dir = std::env::temp_dir().join(format!("slam-ply-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
