@@ -6,6 +6,10 @@ use imageproc::distance_transform::euclidean_squared_distance_transform;
 
 use crate::grid::{Cell, Grid};
 
+/// How far past the radius, in cells squared, a centre still counts as on it: radii are
+/// written in decimals binary floating point does not hold exactly.
+const ON_THE_RADIUS: f64 = 1e-6;
+
 /// The inflated ternary map: every cell whose centre lies within `radius_m` of an occupied cell's
 /// centre becomes occupied; other cells keep their value (unknown stays unknown).
 pub fn inflate(grid: &Grid, radius_m: f64) -> Grid {
@@ -17,7 +21,9 @@ pub fn inflate(grid: &Grid, radius_m: f64) -> Grid {
     });
     let d2 = euclidean_squared_distance_transform(&obstacles);
     let r_cells = radius_m.max(0.0) / grid.resolution();
-    let limit = r_cells * r_cells;
+    // A centre exactly the radius away is within it: 0.35 / 0.05 is 6.999… in floating point,
+    // and without the tolerance a straight wall grew by 0.30 m, not 0.35 m.
+    let limit = r_cells * r_cells + ON_THE_RADIUS;
     let mut out = grid.clone();
     for (x, y, Luma([dist2])) in d2.enumerate_pixels() {
         if *dist2 <= limit {
@@ -54,5 +60,20 @@ mod tests {
             13
         );
         assert_eq!(inflate(&g, 0.0), g);
+    }
+
+    #[test]
+    fn a_radius_of_whole_cells_reaches_the_cell_that_far() {
+        // A wall along the top row of 0.05 m cells: every radius the missions plan with grows it
+        // by its whole length, though 0.35 / 0.05 is 6.999… in floating point.
+        let mut g = Grid::new(3, 12, 0.05, [0.0, 0.0], Cell::Free);
+        for x in 0..3 {
+            g.set((x, 11), Cell::Occupied);
+        }
+        for (radius, cells) in [(0.25, 5), (0.35, 7), (0.45, 9), (0.15, 3)] {
+            let i = inflate(&g, radius);
+            let grown = (0..11).filter(|&y| i.get((1, y)) == Cell::Occupied).count();
+            assert_eq!(grown, cells, "radius {radius} m");
+        }
     }
 }
