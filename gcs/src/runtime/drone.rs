@@ -275,6 +275,13 @@ pub struct DroneConfig {
     pub blind_hold_gain: f64,
     /// …at most this fast, m/s.
     pub blind_hold_max_mps: f64,
+    /// While the SLAM has lost the drone and the filter carries its pose (on visual odometry, or
+    /// its model), roll and pitch are held to at most this much stick. Holding a spot takes
+    /// little (braking a 0.3 m/s drift within a second, about 0.1 of the 20° lean), while a
+    /// filter that visual odometry on a few features had thrown 0.3 m off and given a phantom
+    /// 0.4 m/s drew 0.46 from the hold's derivative term and flew the drone into a wall at
+    /// 0.5 m/s (main command, seed 368, stop 82).
+    pub lost_stick_max: f64,
     /// With no pose, the drone leans away from walls its depth camera ranged near lately, or
     /// the map had round it when it went blind ([`nav::proximity`]).
     pub proximity: ProximityConfig,
@@ -367,6 +374,7 @@ impl Default for DroneConfig {
             blind_brake_band: 0.03,
             blind_hold_gain: 0.0,
             blind_hold_max_mps: 0.1,
+            lost_stick_max: 0.15,
             proximity: ProximityConfig::default(),
             battery: battery::Limits {
                 // The simulated vehicle's battery failsafe lands it at 10 %.
@@ -1641,6 +1649,11 @@ impl Drone {
             c.pitch = (c.pitch + forward).clamp(-1.0, 1.0);
             c.roll = (c.roll - left).clamp(-1.0, 1.0);
         }
+        if lost.is_some() {
+            let max = config.lost_stick_max;
+            c.roll = c.roll.clamp(-max, max);
+            c.pitch = c.pitch.clamp(-max, max);
+        }
         if sweep {
             c.yaw = f64::from(self.sweep_yaw(config));
         }
@@ -2694,6 +2707,42 @@ mod tests {
         drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.5, None, true);
         drone.slam_lost(0.2, &config);
         tick_until_the_pose_expires(&mut drone, 0.2, &config);
+    }
+
+    #[test]
+    fn a_lost_drone_holds_its_spot_with_a_gentle_lean_whatever_its_filter_makes_of_it() {
+        // Tracked at rest facing +x, then lost; visual odometry on a few features says it is
+        // flying forward at 0.4 m/s (in SITL it had not moved). The hold brakes that: the
+        // strongest pitch over the second after the loss.
+        let strongest = |config: &DroneConfig| {
+            let mut drone = exploring_drone(Arc::default(), config);
+            drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.0, None, true);
+            drone.slam_fix(0.2, [0.0, 0.0, 0.9], 0.0, None, false);
+            drone.tick(0.2, config);
+            let mut t: f64 = 0.3;
+            drone.slam_lost(t, config);
+            let mut strongest = 0f32;
+            while t < 1.3 {
+                t += 0.1;
+                drone.slam_lost(t, config);
+                drone.slam_odometry(t - 0.1, t, &Isometry3::translation(0.04, 0.0, 0.0));
+                drone.tick(t, config);
+                assert!(drone.pose().is_some(), "flying on odometry");
+                let s = drone.sticks.expect("sticks");
+                strongest = strongest.max(s.pitch.abs()).max(s.roll.abs());
+            }
+            strongest
+        };
+        let config = DroneConfig::default();
+        let gentle = strongest(&config);
+        assert!(gentle > 0.05, "it still brakes: {gentle}");
+        assert!(gentle <= config.lost_stick_max as f32 + 1e-6, "{gentle}");
+        // Unbounded, the same filter leans it hard.
+        let unbounded = strongest(&DroneConfig {
+            lost_stick_max: 1.0,
+            ..config.clone()
+        });
+        assert!(unbounded > 0.3, "{unbounded}");
     }
 
     #[test]
