@@ -275,12 +275,15 @@ pub struct DroneConfig {
     pub blind_hold_gain: f64,
     /// …at most this fast, m/s.
     pub blind_hold_max_mps: f64,
-    /// While the SLAM has lost the drone and the filter carries its pose (on visual odometry, or
-    /// its model), roll and pitch are held to at most this much stick. Holding a spot takes
-    /// little (braking a 0.3 m/s drift within a second, about 0.1 of the 20° lean), while a
-    /// filter that visual odometry on a few features had thrown 0.3 m off and given a phantom
-    /// 0.4 m/s drew 0.46 from the hold's derivative term and flew the drone into a wall at
-    /// 0.5 m/s (main command, seed 368, stop 82).
+    /// A drone the SLAM lost while it flew slower than this (by its filter), m/s, holds its
+    /// spot until found again with roll and pitch of at most…
+    pub lost_still_mps: f64,
+    /// …this much stick, while the filter carries its pose on visual odometry or its model.
+    /// Holding a spot takes little (braking a 0.3 m/s drift within a second, about 0.1 of the
+    /// 20° lean), while a filter that visual odometry on a few features had thrown 0.3 m off,
+    /// with a phantom 0.4 m/s, drew 0.46 from the hold's derivative term and flew a hovering
+    /// drone into a wall at 0.5 m/s (main command, seed 368, stop 82). One lost while flying
+    /// faster brakes as hard as it must (seeds 374, 376: lost at 0.7 m/s, braked with 0.36).
     pub lost_stick_max: f64,
     /// With no pose, the drone leans away from walls its depth camera ranged near lately, or
     /// the map had round it when it went blind ([`nav::proximity`]).
@@ -374,6 +377,7 @@ impl Default for DroneConfig {
             blind_brake_band: 0.03,
             blind_hold_gain: 0.0,
             blind_hold_max_mps: 0.1,
+            lost_still_mps: 0.25,
             lost_stick_max: 0.15,
             proximity: ProximityConfig::default(),
             battery: battery::Limits {
@@ -646,6 +650,8 @@ pub struct Drone {
     lost_at: Option<[f64; 2]>,
     /// Since when (the frame's time) the SLAM has not placed it.
     lost_since: Option<f64>,
+    /// It was flying when the SLAM lost it ([`DroneConfig::lost_still_mps`]): it may brake hard.
+    lost_moving: bool,
     /// Since when the vehicle has reported itself disarmed while the station flew it.
     disarmed_since: Option<f64>,
     /// Mission time of its last camera frame (none yet: no camera is watched).
@@ -750,6 +756,7 @@ impl Drone {
             keyframe_at: None,
             lost_at: None,
             lost_since: None,
+            lost_moving: false,
             last_frame: None,
             camera_half_fov: None,
             disarmed_since: None,
@@ -1288,6 +1295,10 @@ impl Drone {
         if self.lost_at.is_some() {
             return;
         }
+        self.lost_moving = self
+            .ekf
+            .valid_velocity()
+            .is_none_or(|v| v[0].hypot(v[1]) > config.lost_still_mps);
         self.lost_at = self.pose().map(|p| match self.keyframe_at {
             Some(k) if (k[0] - p[0]).hypot(k[1] - p[1]) <= config.lost_back_m => k,
             _ => [p[0], p[1]],
@@ -1649,7 +1660,7 @@ impl Drone {
             c.pitch = (c.pitch + forward).clamp(-1.0, 1.0);
             c.roll = (c.roll - left).clamp(-1.0, 1.0);
         }
-        if lost.is_some() {
+        if lost.is_some() && !self.lost_moving {
             let max = config.lost_stick_max;
             c.roll = c.roll.clamp(-max, max);
             c.pitch = c.pitch.clamp(-max, max);
@@ -2710,19 +2721,24 @@ mod tests {
     }
 
     #[test]
-    fn a_lost_drone_holds_its_spot_with_a_gentle_lean_whatever_its_filter_makes_of_it() {
-        // Tracked at rest facing +x, then lost; visual odometry on a few features says it is
-        // flying forward at 0.4 m/s (in SITL it had not moved). The hold brakes that: the
-        // strongest pitch over the second after the loss.
-        let strongest = |config: &DroneConfig| {
+    fn a_drone_lost_hovering_holds_its_spot_with_a_gentle_lean_one_lost_flying_brakes_hard() {
+        // Tracked facing +x at `speed` m/s, then lost; visual odometry on a few features says
+        // it flies forward at 0.4 m/s (in SITL the hovering drone had not moved). The hold
+        // brakes that: the strongest lean over the second after the loss.
+        let strongest = |config: &DroneConfig, speed: f64| {
             let mut drone = exploring_drone(Arc::default(), config);
-            drone.slam_fix(0.1, [0.0, 0.0, 0.9], 0.0, None, true);
-            drone.slam_fix(0.2, [0.0, 0.0, 0.9], 0.0, None, false);
-            drone.tick(0.2, config);
-            let mut t: f64 = 0.3;
-            drone.slam_lost(t, config);
+            let mut t: f64 = 0.0;
+            while t < 0.95 {
+                t += 0.1;
+                drone.slam_fix(t, [speed * t, 0.0, 0.9], 0.0, None, true);
+                // The filter's velocity as frame-to-frame registration measures it (from the
+                // fixes alone it would lag: these sticks fly nowhere).
+                drone.ekf.update_odometry(t - 0.1, t, [speed * 0.1, 0.0]);
+                drone.tick(t, config);
+            }
+            let lost = t + 0.1;
             let mut strongest = 0f32;
-            while t < 1.3 {
+            while t < lost + 1.0 {
                 t += 0.1;
                 drone.slam_lost(t, config);
                 drone.slam_odometry(t - 0.1, t, &Isometry3::translation(0.04, 0.0, 0.0));
@@ -2734,15 +2750,18 @@ mod tests {
             strongest
         };
         let config = DroneConfig::default();
-        let gentle = strongest(&config);
+        let gentle = strongest(&config, 0.0);
         assert!(gentle > 0.05, "it still brakes: {gentle}");
         assert!(gentle <= config.lost_stick_max as f32 + 1e-6, "{gentle}");
-        // Unbounded, the same filter leans it hard.
-        let unbounded = strongest(&DroneConfig {
+        // Unbounded, the same filter leans it hard…
+        let unbounded = DroneConfig {
             lost_stick_max: 1.0,
             ..config.clone()
-        });
-        assert!(unbounded > 0.3, "{unbounded}");
+        };
+        assert!(strongest(&unbounded, 0.0) > 0.3);
+        // …as it must a drone lost flying at 0.6 m/s, to stop it.
+        let braking = strongest(&config, 0.6);
+        assert!(braking > 0.3, "{braking}");
     }
 
     #[test]
