@@ -39,7 +39,7 @@ fn altitude_help() -> String {
     format!(
         "Drone 1's altitude band, metres; each further drone flies {BAND_STEP_M} m higher, so \
          paths may cross. Every band must lie within the heights the map's walls are taken \
-         from ({low:.1}–{high:.1} m)"
+         from ({low:.2}–{high:.1} m)"
     )
 }
 
@@ -317,8 +317,8 @@ fn validate(args: &ExploreArgs) -> anyhow::Result<Vec<Fault>> {
     let (low, high) = band_limits();
     if !(args.sim.altitude.is_finite() && args.sim.altitude >= low) {
         bail!(
-            "--altitude {} must be {low:.1} metres or more: the map's walls are taken from \
-             {low:.1} to {high:.1} m",
+            "--altitude {} must be {low:.2} metres or more: the map's walls are taken from \
+             {low:.2} to {high:.1} m",
             args.sim.altitude
         );
     }

@@ -9,7 +9,7 @@
 //! camera = "tcpout:127.0.0.1:5900"     # the TCP frame stream carrying its camera
 //! camera_id = 0                        # its vehicle id in that stream (default: its order there)
 //! start = [1.0, 7.5, 0.0]              # x, y (metres), yaw (radians) in the map, if known
-//! altitude = 0.9                       # its altitude band, metres, 0.3–2.0 (default 0.6 + 0.15·K)
+//! altitude = 0.9                       # its altitude band, metres, 0.25–2.0 (default 0.6 + 0.15·K)
 //! channels = "ardupilot"               # or "thesis" (the thesis's reversed Naza wiring)
 //! signing_key = "alpha"                # MAVLink only: sign with this key (`gcs key list`) and
 //!                                      # refuse anything not signed with it
@@ -118,7 +118,7 @@ pub fn parse(text: &str, origin: &str) -> anyhow::Result<Vec<Vehicle>> {
             let (low, high) = band_limits();
             if !(altitude.is_finite() && (low..=high).contains(&altitude)) {
                 bail!(
-                    "{which}: altitude {altitude} must be {low:.1} to {high:.1} metres, the \
+                    "{which}: altitude {altitude} must be {low:.2} to {high:.1} metres, the \
                      heights the map's walls are taken from"
                 );
             }
@@ -214,7 +214,7 @@ channels = "thesis"
         for bad in [with(low - 0.05), with(high + 0.2), nan] {
             let e = format!("{:#}", parse(&bad, "f.toml").expect_err("refused"));
             assert!(
-                e.contains("vehicle 1: altitude") && e.contains("must be 0.3 to 2.0 metres"),
+                e.contains("vehicle 1: altitude") && e.contains("must be 0.25 to 2.0 metres"),
                 "{e}"
             );
         }

@@ -729,11 +729,11 @@ fn bad_explore_arguments_are_refused_before_anything_starts() {
         ),
         (
             vec!["explore", "--altitude", "0.2"],
-            "--altitude 0.2 must be 0.3 metres or more",
+            "--altitude 0.2 must be 0.25 metres or more",
         ),
         (
             vec!["explore", "--altitude", "NaN"],
-            "--altitude NaN must be 0.3 metres or more",
+            "--altitude NaN must be 0.25 metres or more",
         ),
         (
             vec!["explore", "--log-camera-hz=-2"],

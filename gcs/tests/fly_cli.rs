@@ -83,7 +83,7 @@ fn a_bad_fleet_file_is_refused_with_what_to_fix() {
         ),
         (
             &format!("[[vehicle]]\nprotocol = \"shield\"\n{ok}altitude = 9.0\n"),
-            "altitude 9 must be 0.3 to 2.0 metres",
+            "altitude 9 must be 0.25 to 2.0 metres",
         ),
     ] {
         let path = dir.join("fleet.toml");
