@@ -64,6 +64,20 @@ pub enum MapError {
     },
 }
 
+/// A length of `length_m` metres in cells of `resolution` metres, a whole number where the
+/// division misses one by rounding only: settings are written in decimals binary floating point
+/// does not hold (`0.35 / 0.05` is 6.999…, `0.3 / 0.05` 5.999…), and a radius or a height
+/// floored, ceiled or squared from that falls a cell short.
+pub fn in_cells(length_m: f64, resolution: f64) -> f64 {
+    let cells = length_m / resolution;
+    let whole = cells.round();
+    if (cells - whole).abs() <= 1e-9 * whole.abs().max(1.0) {
+        whole
+    } else {
+        cells
+    }
+}
+
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct MapYaml {
@@ -363,6 +377,18 @@ pub(crate) mod tests {
         Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("../../shared/data/maps")
             .join(name)
+    }
+
+    #[test]
+    fn a_length_of_whole_cells_is_whole() {
+        assert_eq!(in_cells(0.35, 0.05), 7.0);
+        assert_eq!(in_cells(0.3, 0.05), 6.0);
+        assert_eq!(in_cells(0.15, 0.05), 3.0);
+        assert_eq!(in_cells(0.45, 0.05), 9.0);
+        assert_eq!(in_cells(0.0, 0.05), 0.0);
+        // Not near a whole number: as divided.
+        assert!((in_cells(0.27, 0.05) - 5.4).abs() < 1e-12);
+        assert!((in_cells(0.21, 0.1) - 2.1).abs() < 1e-12);
     }
 
     #[test]

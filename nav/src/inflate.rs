@@ -4,11 +4,7 @@
 use image::{GrayImage, Luma};
 use imageproc::distance_transform::euclidean_squared_distance_transform;
 
-use crate::grid::{Cell, Grid};
-
-/// How far past the radius, in cells squared, a centre still counts as on it: radii are
-/// written in decimals binary floating point does not hold exactly.
-const ON_THE_RADIUS: f64 = 1e-6;
+use crate::grid::{Cell, Grid, in_cells};
 
 /// The inflated ternary map: every cell whose centre lies within `radius_m` of an occupied cell's
 /// centre becomes occupied; other cells keep their value (unknown stays unknown).
@@ -20,10 +16,10 @@ pub fn inflate(grid: &Grid, radius_m: f64) -> Grid {
         )])
     });
     let d2 = euclidean_squared_distance_transform(&obstacles);
-    let r_cells = radius_m.max(0.0) / grid.resolution();
-    // A centre exactly the radius away is within it: 0.35 / 0.05 is 6.999… in floating point,
-    // and without the tolerance a straight wall grew by 0.30 m, not 0.35 m.
-    let limit = r_cells * r_cells + ON_THE_RADIUS;
+    // A centre exactly the radius away is within it (divided plainly, 0.35 m of 0.05 m cells
+    // is 6.999…, and a straight wall grew by 0.30 m).
+    let r_cells = in_cells(radius_m.max(0.0), grid.resolution());
+    let limit = r_cells * r_cells;
     let mut out = grid.clone();
     for (x, y, Luma([dist2])) in d2.enumerate_pixels() {
         if *dist2 <= limit {

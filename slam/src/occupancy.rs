@@ -15,7 +15,7 @@ use std::io::{self, Write};
 use std::path::Path;
 
 use nalgebra::{Isometry3, Point3, Vector3};
-use nav::grid::{Cell, Grid};
+use nav::grid::{Cell, Grid, in_cells};
 
 /// Sensor model and projection settings.
 #[derive(Debug, Clone, PartialEq)]
@@ -71,19 +71,15 @@ impl Default for OccupancyConfig {
     }
 }
 
-/// How near a multiple of the resolution a height must be to count as on a layer's boundary, in
-/// layers: heights are written in decimals that binary floating point does not hold exactly.
-const LAYER_EPSILON: f64 = 1e-6;
-
 /// The lowest voxel layer at or above height `z` (layers of edge `r` from 0 up): a height on a
 /// boundary starts the layer above it. `(0.3 / 0.05).floor()` is 5 in floating point; this is 6.
 fn layer_from(z: f64, r: f64) -> i32 {
-    (z / r + LAYER_EPSILON).floor() as i32
+    in_cells(z, r).floor() as i32
 }
 
 /// The highest voxel layer below height `z`: a height on a boundary ends the layer below it.
 fn layer_below(z: f64, r: f64) -> i32 {
-    (z / r - LAYER_EPSILON).ceil() as i32 - 1
+    in_cells(z, r).ceil() as i32 - 1
 }
 
 /// A depth image to insert: depth along the optical axis in units of `depth_scale` metres
