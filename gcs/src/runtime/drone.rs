@@ -601,6 +601,9 @@ pub struct Drone {
     /// The way its look around at take-off turns, shared with the drones that take off beside
     /// it ([`Drone::share_first_look`]); `None`: the short way to the unknown.
     first_look_turn: Option<f64>,
+    /// Its look around (or its goal) ended and it has no goal: the mission asks the planner at
+    /// once instead of at its next step ([`Drone::awaits_plan`]).
+    awaits_plan: bool,
     /// The stuck clock: since when, and from where, it has not moved 0.3 m.
     progress: (f64, [f64; 2]),
     /// The frontier goal the stuck clock runs for, and when the planner last gave it.
@@ -731,6 +734,7 @@ impl Drone {
             goal: None,
             look_turn: None,
             first_look_turn: None,
+            awaits_plan: false,
             progress: (t, [x, y]),
             clocked_goal: None,
             scan: None,
@@ -1008,6 +1012,13 @@ impl Drone {
         }
     }
 
+    /// It is exploring with nothing to fly to since its look around ended (or it gave up its
+    /// goal), and no plan has come since: every second it waits for the planner's next step is
+    /// a second it hovers (a lone drone's 13 looks around in the apartment).
+    pub fn awaits_plan(&self) -> bool {
+        self.awaits_plan && self.phase == Phase::Exploring && self.scan.is_none()
+    }
+
     /// Holds position with the operator's goal height and yaw (the thesis's control-test tab).
     pub fn hold(&mut self, height: f64, yaw: f64) {
         if !self.phase.flying() {
@@ -1073,6 +1084,7 @@ impl Drone {
         if self.phase != Phase::Exploring || self.scan.is_some() {
             return;
         }
+        self.awaits_plan = false;
         if goal != self.goal {
             tracing::debug!(drone = self.id + 1, from = ?self.goal, to = ?goal, "new goal");
         }
@@ -1922,6 +1934,7 @@ impl Drone {
                 "look around over"
             );
             self.scan = None;
+            self.awaits_plan = true;
             return scan.give_up.map(|goal| {
                 if scan.cut {
                     DroneEvent::LookCut(goal, scan.direction)
@@ -1959,6 +1972,7 @@ impl Drone {
             );
             self.set_path(vec![]);
             self.progress = (now, here);
+            self.awaits_plan = true;
             return self.goal.take().map(DroneEvent::GiveUp);
         }
         None
@@ -3197,6 +3211,44 @@ mod tests {
             }
             assert!(t < config.scan_s + 1.0, "the look around went on");
         }
+    }
+
+    #[test]
+    fn a_drone_awaits_a_plan_from_the_end_of_its_look_around_until_one_comes() {
+        let config = DroneConfig::default();
+        let mut drone = exploring_drone(Arc::default(), &config);
+        drone.set_map(Arc::new(walled_room(None)));
+        drone.set_plan(Some([1.0, 0.0]), vec![[1.0, 0.0]], None, 0.0);
+        let mut t = 0.0;
+        let fly = |drone: &mut Drone, t: f64| {
+            drone.slam_fix(t, [0.0, 0.0, 0.9], drone.yaw_goal, None, false);
+            drone.tick(t, &config)
+        };
+        // Flying to its goal, then looking around there: it has a plan.
+        while t < 1.0 {
+            t += 0.1;
+            assert_eq!(fly(&mut drone, t), None);
+            assert!(!drone.awaits_plan(), "on its way at {t:.1} s");
+        }
+        drone.set_plan(Some([1.0, 0.0]), vec![[0.0, 0.0]], None, t);
+        loop {
+            t += 0.1;
+            let event = fly(&mut drone, t);
+            if event.is_some() {
+                break;
+            }
+            assert!(!drone.awaits_plan(), "looking around at {t:.1} s");
+            assert!(t < config.scan_s + 1.0, "the look around went on");
+        }
+        assert!(
+            drone.awaits_plan(),
+            "its look around is over and it has no goal"
+        );
+        fly(&mut drone, t + 0.1);
+        assert!(drone.awaits_plan(), "it hovers until a plan comes");
+        // A plan, even one with nothing for it, is what it waited for.
+        drone.set_plan(None, vec![], None, t + 0.2);
+        assert!(!drone.awaits_plan());
     }
 
     #[test]

@@ -35,7 +35,7 @@ use crate::clock::Clock;
 use crate::record::{PlannedGoal, Record, Recorder};
 use drone::{Drone, DroneConfig, DroneEvent, DroneSpec, Phase};
 use perception::{CameraFrame, Perception, PerceptionResult, SensorLog, SensorSample, SlamView};
-use planning::{Ask, Planner, PlannerStopped};
+use planning::{Ask, Cadence, Planner, PlannerStopped};
 use stall::{STALL_S, Stall};
 use trail::Trail;
 
@@ -69,7 +69,8 @@ pub struct RuntimeConfig {
     pub centre_paths: bool,
     /// Control period, seconds (mission clock).
     pub control_period: f64,
-    /// Mission-planner period, seconds.
+    /// Mission-planner period, seconds; a drone done looking around asks sooner
+    /// ([`planning::Cadence`]).
     pub plan_period: f64,
     /// Every drone's controllers and behaviour.
     pub drone: DroneConfig,
@@ -523,7 +524,7 @@ impl Mission {
     fn run(&mut self) -> MissionReport {
         self.trajectories = vec![Trail::default(); self.drones.len()];
         let mut next_control = self.clock.now();
-        let mut next_plan = next_control + 2.0;
+        let mut cadence = Cadence::new(self.config.plan_period, next_control + 2.0);
         // When the operator (or the process) asked to end: the runtime waits for the drones to
         // come down, but not for ever (a vehicle that never reports landing must not hang it).
         let mut shutdown: Option<f64> = None;
@@ -551,8 +552,7 @@ impl Mission {
                 self.control(now);
                 self.publish(now);
             }
-            if now >= next_plan {
-                next_plan = (next_plan + self.config.plan_period).max(now - 1.0);
+            if cadence.due(now, self.drones.iter().any(Drone::awaits_plan)) {
                 self.ask_plan(now);
                 self.plan_home();
             }

@@ -57,6 +57,49 @@ pub struct Answer {
     pub seconds: [f64; 2],
 }
 
+/// When the mission asks the planner for a step: every `period` seconds, and at once (but no
+/// sooner than [`Cadence::MIN_GAP_S`] after the last ask) when a drone waits for a plan.
+/// A drone done looking around otherwise hovered until the next step, half a period on
+/// average, at each of its goals.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Cadence {
+    period: f64,
+    next: f64,
+    last: f64,
+}
+
+impl Cadence {
+    /// A waiting drone's ask comes no sooner than this after the last, seconds: the planner
+    /// may have no goal for it, and must not be asked without pause meanwhile.
+    pub const MIN_GAP_S: f64 = 0.2;
+
+    /// Steps every `period` seconds, the first at `first`.
+    pub fn new(period: f64, first: f64) -> Self {
+        Self {
+            period,
+            next: first,
+            last: f64::NEG_INFINITY,
+        }
+    }
+
+    /// Whether to ask for a step at `now`, with `waiting`: a drone waits for a plan. A step
+    /// asked early starts the period again from it.
+    pub fn due(&mut self, now: f64, waiting: bool) -> bool {
+        let due = now >= self.next || (waiting && now - self.last >= Self::MIN_GAP_S);
+        if due {
+            // A loop that fell far behind (a debugger, a stalled process) does not ask again
+            // and again to catch up.
+            self.next = if now >= self.next {
+                (self.next + self.period).max(now - 1.0)
+            } else {
+                now + self.period
+            };
+            self.last = now;
+        }
+        due
+    }
+}
+
 /// The planner's thread: one step at a time, the next asked only once the last is answered.
 pub struct Planner {
     asks: Sender<Ask>,
@@ -249,6 +292,40 @@ mod tests {
             cloud: Arc::new(cloud),
         });
         map
+    }
+
+    /// The times in 0..`until` seconds (10 ms ticks) a cadence asks at, a drone waiting from
+    /// each of `waits` (start, end) to the other.
+    fn asks(cadence: &mut Cadence, until: f64, waits: &[(f64, f64)]) -> Vec<f64> {
+        (0..(until * 100.0) as usize)
+            .map(|i| i as f64 / 100.0)
+            .filter(|&t| cadence.due(t, waits.iter().any(|&(a, b)| t >= a && t < b)))
+            .collect()
+    }
+
+    #[test]
+    fn a_drone_waiting_for_a_plan_is_planned_for_at_once_and_the_period_restarts_from_it() {
+        let near = |a: &[f64], b: &[f64]| {
+            a.len() == b.len() && a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-9)
+        };
+        let plain = asks(&mut Cadence::new(1.0, 2.0), 5.0, &[]);
+        assert!(near(&plain, &[2.0, 3.0, 4.0]), "{plain:?}");
+        // Waiting from 3.3 s until the plan came (3.35 s): asked at 3.3, then a period on.
+        let early = asks(&mut Cadence::new(1.0, 2.0), 6.0, &[(3.3, 3.35)]);
+        assert!(near(&early, &[2.0, 3.0, 3.3, 4.3, 5.3]), "{early:?}");
+        // Still waiting (no goal for it): asked again only every MIN_GAP_S.
+        let waiting = asks(&mut Cadence::new(1.0, 2.0), 3.5, &[(2.5, 3.5)]);
+        assert!(near(&waiting[..2], &[2.0, 2.5]), "{waiting:?}");
+        assert!(waiting.len() >= 6, "asked on while it waits: {waiting:?}");
+        assert!(
+            waiting[1..]
+                .windows(2)
+                .all(|w| w[1] - w[0] > 0.19 && w[1] - w[0] < 0.215),
+            "every 0.2 s, to the 10 ms tick: {waiting:?}"
+        );
+        // Not sooner than MIN_GAP_S after a step of the period.
+        let just = asks(&mut Cadence::new(1.0, 2.0), 3.0, &[(2.05, 2.1)]);
+        assert!(near(&just, &[2.0]), "{just:?}");
     }
 
     fn ask(drones: Vec<usize>, robots: Vec<Option<[f64; 2]>>) -> Ask {
