@@ -112,6 +112,11 @@ pub struct SimArgs {
     /// middle of a door, not along its jamb; `false`: shortest paths.
     #[arg(long, value_name = "BOOL", default_value_t = RuntimeConfig::default().centre_paths, action = clap::ArgAction::Set)]
     pub centre_paths: bool,
+    /// A drone that ends its look around with nowhere to go is planned for as soon as the map
+    /// holds what the look saw, not at the planner's next once-a-second step
+    /// (`RuntimeConfig::plan_when_looked`).
+    #[arg(long, value_name = "BOOL", default_value_t = RuntimeConfig::default().plan_when_looked, action = clap::ArgAction::Set)]
+    pub plan_when_looked: bool,
     /// A drone flies nowhere faster than this, m/s (slower into a sharp bend of its path).
     #[arg(long, value_name = "M_PER_S", default_value_t = DroneConfig::default().follower.max_speed_mps)]
     pub max_speed: f64,
@@ -558,6 +563,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
             turn_m_per_rad: args.sim.turn_cost,
             stage_back_m: args.sim.stage_back,
             centre_paths: args.sim.centre_paths,
+            plan_when_looked: args.sim.plan_when_looked,
             timeout: Some(args.timeout),
             drone: DroneConfig {
                 sweep: match args.sim.look_around {
@@ -962,4 +968,32 @@ fn write_outputs(
         outputs::write_trajectory(&out.join(format!("{name}-truth.tum")), truth)?;
     }
     outputs::write_json(&out.join("summary.json"), summary)
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use super::*;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        explore: ExploreArgs,
+    }
+
+    fn parse(args: &[&str]) -> ExploreArgs {
+        match Cli::try_parse_from(std::iter::once("explore").chain(args.iter().copied())) {
+            Ok(cli) => cli.explore,
+            Err(e) => panic!("{args:?}: {e}"),
+        }
+    }
+
+    #[test]
+    fn planning_at_the_end_of_a_look_is_off_unless_asked_for() {
+        assert!(!parse(&[]).sim.plan_when_looked);
+        assert!(parse(&["--plan-when-looked", "true"]).sim.plan_when_looked);
+        assert!(!parse(&["--plan-when-looked", "false"]).sim.plan_when_looked);
+        assert!(Cli::try_parse_from(["explore", "--plan-when-looked", "soon"]).is_err());
+    }
 }

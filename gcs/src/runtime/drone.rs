@@ -601,9 +601,12 @@ pub struct Drone {
     /// The way its look around at take-off turns, shared with the drones that take off beside
     /// it ([`Drone::share_first_look`]); `None`: the short way to the unknown.
     first_look_turn: Option<f64>,
-    /// Its look around (or its goal) ended and it has no goal: the mission asks the planner at
-    /// once instead of at its next step ([`Drone::awaits_plan`]).
-    awaits_plan: bool,
+    /// Since when it has had nothing to fly to: its look around (or its goal) ended and no plan
+    /// has come since ([`Drone::awaits_plan`]).
+    awaits_plan: Option<f64>,
+    /// The capture time of the newest of its camera frames the SLAM has processed (and cast
+    /// into the map, if it became a keyframe).
+    mapped_until: f64,
     /// The stuck clock: since when, and from where, it has not moved 0.3 m.
     progress: (f64, [f64; 2]),
     /// The frontier goal the stuck clock runs for, and when the planner last gave it.
@@ -734,7 +737,8 @@ impl Drone {
             goal: None,
             look_turn: None,
             first_look_turn: None,
-            awaits_plan: false,
+            awaits_plan: None,
+            mapped_until: f64::NEG_INFINITY,
             progress: (t, [x, y]),
             clocked_goal: None,
             scan: None,
@@ -1013,10 +1017,15 @@ impl Drone {
     }
 
     /// It is exploring with nothing to fly to since its look around ended (or it gave up its
-    /// goal), and no plan has come since: every second it waits for the planner's next step is
-    /// a second it hovers (a lone drone's 13 looks around in the apartment).
+    /// goal), no plan has come since, and the SLAM has processed its camera frames up to then:
+    /// every second it waits for the planner's next step is a second it hovers (a lone drone's
+    /// 13 looks around in the apartment), but a plan on a map without the look's last frames
+    /// may send it past a corner the look saw.
     pub fn awaits_plan(&self) -> bool {
-        self.awaits_plan && self.phase == Phase::Exploring && self.scan.is_none()
+        self.awaits_plan
+            .is_some_and(|since| self.mapped_until >= since)
+            && self.phase == Phase::Exploring
+            && self.scan.is_none()
     }
 
     /// Holds position with the operator's goal height and yaw (the thesis's control-test tab).
@@ -1084,7 +1093,7 @@ impl Drone {
         if self.phase != Phase::Exploring || self.scan.is_some() {
             return;
         }
-        self.awaits_plan = false;
+        self.awaits_plan = None;
         if goal != self.goal {
             tracing::debug!(drone = self.id + 1, from = ?self.goal, to = ?goal, "new goal");
         }
@@ -1200,6 +1209,7 @@ impl Drone {
     /// carries the pose on as between frames.
     pub fn take_fix(&mut self, now: f64, fix: &SlamFix, config: &DroneConfig) {
         self.camera_frame(now, fix.half_fov_rad);
+        self.mapped_until = self.mapped_until.max(fix.stamp);
         if let Some(heading) = fix.heading {
             self.proximity
                 .observe(fix.stamp, heading, &fix.ranges, &config.proximity);
@@ -1934,7 +1944,7 @@ impl Drone {
                 "look around over"
             );
             self.scan = None;
-            self.awaits_plan = true;
+            self.awaits_plan = Some(now);
             return scan.give_up.map(|goal| {
                 if scan.cut {
                     DroneEvent::LookCut(goal, scan.direction)
@@ -1972,7 +1982,7 @@ impl Drone {
             );
             self.set_path(vec![]);
             self.progress = (now, here);
-            self.awaits_plan = true;
+            self.awaits_plan = Some(now);
             return self.goal.take().map(DroneEvent::GiveUp);
         }
         None
@@ -3220,8 +3230,25 @@ mod tests {
         drone.set_map(Arc::new(walled_room(None)));
         drone.set_plan(Some([1.0, 0.0]), vec![[1.0, 0.0]], None, 0.0);
         let mut t = 0.0;
+        // The SLAM's fixes come 0.25 s after their frames were taken.
+        const LAG_S: f64 = 0.25;
         let fly = |drone: &mut Drone, t: f64| {
-            drone.slam_fix(t, [0.0, 0.0, 0.9], drone.yaw_goal, None, false);
+            let fix = SlamFix {
+                drone: 0,
+                stamp: t - LAG_S,
+                map_from_body: Some(Isometry3::new(
+                    nalgebra::Vector3::new(0.0, 0.0, 0.9),
+                    nalgebra::Vector3::z() * drone.yaw_goal,
+                )),
+                keyframe: false,
+                inliers: Some(120),
+                weak: false,
+                odometry: None,
+                half_fov_rad: 0.5,
+                ranges: vec![],
+                heading: None,
+            };
+            drone.take_fix(t, &fix, &config);
             drone.tick(t, &config)
         };
         // Flying to its goal, then looking around there: it has a plan.
@@ -3240,14 +3267,21 @@ mod tests {
             assert!(!drone.awaits_plan(), "looking around at {t:.1} s");
             assert!(t < config.scan_s + 1.0, "the look around went on");
         }
-        assert!(
-            drone.awaits_plan(),
-            "its look around is over and it has no goal"
-        );
-        fly(&mut drone, t + 0.1);
+        // Its look around is over and it has no goal, but the map does not hold the look's
+        // last frames yet.
+        for _ in 0..2 {
+            t += 0.1;
+            fly(&mut drone, t);
+            assert!(!drone.awaits_plan(), "frames to {:.2} s mapped", t - LAG_S);
+        }
+        t += 0.1;
+        fly(&mut drone, t);
+        assert!(drone.awaits_plan(), "the map holds the frames to the end");
+        t += 0.1;
+        fly(&mut drone, t);
         assert!(drone.awaits_plan(), "it hovers until a plan comes");
         // A plan, even one with nothing for it, is what it waited for.
-        drone.set_plan(None, vec![], None, t + 0.2);
+        drone.set_plan(None, vec![], None, t);
         assert!(!drone.awaits_plan());
     }
 

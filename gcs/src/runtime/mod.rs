@@ -72,10 +72,12 @@ pub struct RuntimeConfig {
     /// Mission-planner period, seconds.
     pub plan_period: f64,
     /// A drone that ends its look around with nowhere to go asks the planner at once, not at
-    /// its next step ([`planning::Cadence`]). Off by default: four drones finished 3.3 s
-    /// sooner over 48 seeds, but lone drones on true poses touched a wall block's corner
-    /// twice in 72 missions (none in 48 beside them without it), their paths planned, by my
-    /// reading, on a map without that corner (`docs/benchmarks.md`, stop 83).
+    /// its next step ([`planning::Cadence`]), as soon as the SLAM has processed its frames to
+    /// the look's end ([`Drone::awaits_plan`]). Off by default (`gcs explore
+    /// --plan-when-looked true`): on true poses, over 48 seeds side by side, four drones
+    /// finished 4.6 s and one drone 5.7 s sooner with no collision, but on SLAM poses the main
+    /// command gained nothing over 24 seeds and had 4 collisions of drones the SLAM had lost,
+    /// against none (`docs/benchmarks.md`, stop 84).
     pub plan_when_looked: bool,
     /// Every drone's controllers and behaviour.
     pub drone: DroneConfig,
