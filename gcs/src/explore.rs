@@ -120,6 +120,10 @@ pub struct SimArgs {
     /// A drone flies nowhere faster than this, m/s (slower into a sharp bend of its path).
     #[arg(long, value_name = "M_PER_S", default_value_t = DroneConfig::default().follower.max_speed_mps)]
     pub max_speed: f64,
+    /// Flying, a drone's camera faces its path this far ahead, round the path's bends, metres
+    /// (0: it faces the point it flies to, 0.4 m ahead).
+    #[arg(long, value_name = "M", default_value_t = DroneConfig::default().follower.view_m)]
+    pub view_ahead: f64,
     /// How a drone looks around at a goal: turning the short way to what the map shows
     /// unknown, no further (`sweep`), or a whole turn every time (`whole`, as the thesis).
     #[arg(long, value_enum, default_value_t = LookAround::Sweep)]
@@ -371,6 +375,12 @@ fn validate(args: &ExploreArgs) -> anyhow::Result<Vec<Fault>> {
             args.sim.max_speed
         );
     }
+    if !(args.sim.view_ahead.is_finite() && (0.0..=10.0).contains(&args.sim.view_ahead)) {
+        bail!(
+            "--view-ahead {} must be between 0 (off) and 10 metres",
+            args.sim.view_ahead
+        );
+    }
     if !(args.sim.stage_back.is_finite() && (0.0..=50.0).contains(&args.sim.stage_back)) {
         bail!(
             "--stage-back {} must be between 0 (off) and 50 metres",
@@ -573,6 +583,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
                 battery_swap: args.sim.battery_swap.map(|_| BatterySwap::default()),
                 follower: FollowerConfig {
                     max_speed_mps: args.sim.max_speed,
+                    view_m: args.sim.view_ahead,
                     ..DroneConfig::default().follower
                 },
                 ..DroneConfig::default()
@@ -995,5 +1006,18 @@ mod tests {
         assert!(parse(&["--plan-when-looked", "true"]).sim.plan_when_looked);
         assert!(!parse(&["--plan-when-looked", "false"]).sim.plan_when_looked);
         assert!(Cli::try_parse_from(["explore", "--plan-when-looked", "soon"]).is_err());
+    }
+
+    #[test]
+    fn the_camera_watches_the_path_ahead_unless_told_not_to() {
+        let default = parse(&[]).sim.view_ahead;
+        assert_eq!(default, DroneConfig::default().follower.view_m);
+        assert!(default > 0.0);
+        assert_eq!(parse(&["--view-ahead", "0"]).sim.view_ahead, 0.0);
+        assert!(validate(&parse(&["--view-ahead", "0"])).is_ok());
+        for bad in ["-1", "NaN", "11"] {
+            let e = validate(&parse(&[&format!("--view-ahead={bad}")])).expect_err(bad);
+            assert!(e.to_string().contains("--view-ahead"), "{bad}: {e}");
+        }
     }
 }

@@ -146,6 +146,11 @@ pub struct FollowerConfig {
     pub bend_slow_per_s: f64,
     /// Nowhere faster than this, m/s (infinite: no limit but the bends').
     pub max_speed_mps: f64,
+    /// Flying, the camera faces the path this far ahead (metres along it, round its bends),
+    /// though never more than [`FollowerConfig::resume_threshold_rad`] off the carrot's
+    /// bearing: it turns into a bend before the drone reaches it, instead of facing whatever
+    /// wall lies beyond the bend. 0: it faces the carrot.
+    pub view_m: f64,
 }
 
 impl Default for FollowerConfig {
@@ -163,6 +168,7 @@ impl Default for FollowerConfig {
             // Indoors, with a camera that maps 4 m ahead. Pursuing its carrot down a corridor
             // the simulated drone reached 1.1 m/s, too fast to brake for a door's bend.
             max_speed_mps: 0.7,
+            view_m: 0.0,
         }
     }
 }
@@ -179,8 +185,8 @@ pub enum Follow {
         /// Heading to turn to, radians.
         yaw: f64,
     },
-    /// Fly to the carrot, facing `yaw` (the camera looks where the drone goes), at most at
-    /// `speed_mps`.
+    /// Fly to the carrot, facing `yaw` (the camera looks where the drone goes: the carrot, or
+    /// the path further ahead, [`FollowerConfig::view_m`]), at most at `speed_mps`.
     Track {
         /// Position setpoint, map frame.
         carrot: [f64; 2],
@@ -241,7 +247,7 @@ impl PathFollower {
             return Follow::Arrived;
         }
         if self.path.len() == 1 {
-            return self.aim(pose, first, first, self.config.max_speed_mps);
+            return self.aim(pose, first, first, None, self.config.max_speed_mps);
         }
         // Progress: the nearest point on the segments from the current one on (never backwards).
         let (mut best, mut best_d, mut best_t) = (self.segment, f64::INFINITY, 0.0);
@@ -255,30 +261,36 @@ impl PathFollower {
         self.segment = best;
         let (a, b) = (self.path[best], self.path[best + 1]);
         let nearest = [a[0] + best_t * (b[0] - a[0]), a[1] + best_t * (b[1] - a[1])];
-        // Walk the lookahead along the path from the nearest point, at most `corner_m` round the
-        // next corner.
-        let mut left = self.config.lookahead_m;
-        let mut from = nearest;
-        let mut carrot = end;
-        for k in best..self.path.len() - 1 {
-            let to = self.path[k + 1];
-            let len = dist(from, to);
-            if len >= left {
-                let f = left / len.max(1e-12);
-                carrot = [
-                    from[0] + f * (to[0] - from[0]),
-                    from[1] + f * (to[1] - from[1]),
-                ];
-                break;
-            }
-            left = (left - len).min(self.config.corner_m);
-            from = to;
-        }
+        let carrot = self.along(best, nearest, self.config.lookahead_m, self.config.corner_m);
         let speed = self.next_bend(best, nearest).map_or(f64::INFINITY, |d| {
             self.config.bend_speed_mps + self.config.bend_slow_per_s * d
         });
         let speed = speed.min(self.config.max_speed_mps);
-        self.aim(pose, nearest, carrot, speed)
+        let view = (self.config.view_m > 0.0)
+            .then(|| self.along(best, nearest, self.config.view_m, f64::INFINITY));
+        self.aim(pose, nearest, carrot, view, speed)
+    }
+
+    /// The point `length` metres along the path from `from` (on segment `segment`), but at
+    /// most `corner` metres round the first corner after `from`; the path's end if it is
+    /// shorter.
+    fn along(&self, segment: usize, from: [f64; 2], length: f64, corner: f64) -> [f64; 2] {
+        let mut left = length;
+        let mut from = from;
+        for k in segment..self.path.len() - 1 {
+            let to = self.path[k + 1];
+            let len = dist(from, to);
+            if len >= left {
+                let f = left / len.max(1e-12);
+                return [
+                    from[0] + f * (to[0] - from[0]),
+                    from[1] + f * (to[1] - from[1]),
+                ];
+            }
+            left = (left - len).min(corner);
+            from = to;
+        }
+        self.path[self.path.len() - 1]
     }
 
     /// How far along the path from `nearest` (on segment `segment`) its next bend sharper than
@@ -302,9 +314,18 @@ impl PathFollower {
         None
     }
 
-    fn aim(&mut self, pose: Pose2, nearest: [f64; 2], carrot: [f64; 2], speed_mps: f64) -> Follow {
-        let (dx, dy) = (carrot[0] - pose.x, carrot[1] - pose.y);
-        let yaw = dy.atan2(dx);
+    /// Turn to the carrot, or fly to it facing `view` (the path further ahead, if one is
+    /// watched: [`FollowerConfig::view_m`]).
+    fn aim(
+        &mut self,
+        pose: Pose2,
+        nearest: [f64; 2],
+        carrot: [f64; 2],
+        view: Option<[f64; 2]>,
+        speed_mps: f64,
+    ) -> Follow {
+        let bearing = |to: [f64; 2]| (to[1] - pose.y).atan2(to[0] - pose.x);
+        let yaw = bearing(carrot);
         let error = wrap_angle(yaw - pose.yaw).abs();
         self.turning = if self.turning {
             error > self.config.resume_threshold_rad
@@ -312,13 +333,20 @@ impl PathFollower {
             error > self.config.turn_threshold_rad
         };
         if self.turning {
-            Follow::Turn { at: nearest, yaw }
-        } else {
-            Follow::Track {
-                carrot,
-                yaw,
-                speed_mps,
+            return Follow::Turn { at: nearest, yaw };
+        }
+        // A view point nearer than the carrot (the path's end) has no bearing worth facing.
+        let facing = match view {
+            Some(v) if dist([pose.x, pose.y], v) > self.config.lookahead_m => {
+                let off = self.config.resume_threshold_rad;
+                wrap_angle(yaw + wrap_angle(bearing(v) - yaw).clamp(-off, off))
             }
+            _ => yaw,
+        };
+        Follow::Track {
+            carrot,
+            yaw: facing,
+            speed_mps,
         }
     }
 }
@@ -342,7 +370,7 @@ fn project(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> (f64, [f64; 2]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::f64::consts::{FRAC_PI_2, PI};
+    use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, PI};
 
     #[test]
     fn turns_first_then_flies_then_advances() {
@@ -486,14 +514,68 @@ mod tests {
         assert_eq!(f.step(pose(4.0, 3.8, FRAC_PI_2)), Follow::Arrived);
     }
 
-    /// The speed limit the follower with `config` sets at `at` facing +x on `path`.
-    fn speed_at(config: FollowerConfig, path: Vec<[f64; 2]>, at: [f64; 2]) -> f64 {
+    /// The heading the follower with `config` flies at `at`, facing +x, on `path`.
+    fn facing_at(config: &FollowerConfig, path: &[[f64; 2]], at: [f64; 2]) -> f64 {
+        track_at(config.clone(), path.to_vec(), at).0
+    }
+
+    #[test]
+    fn the_camera_turns_into_a_bend_before_the_drone_reaches_it() {
+        // Bends of up to 90° flown while turning (as the station flies them).
+        let carrot_only = FollowerConfig {
+            turn_threshold_rad: FRAC_PI_2,
+            resume_threshold_rad: PI / 3.0,
+            ..FollowerConfig::default()
+        };
+        let ahead = FollowerConfig {
+            view_m: 1.0,
+            ..carrot_only.clone()
+        };
+        let corner = [[0.0, 0.0], [4.0, 0.0], [4.0, 4.0]];
+        // Far from the bend both face along the path.
+        for c in [&carrot_only, &ahead] {
+            assert!(facing_at(c, &corner, [1.0, 0.0]).abs() < 1e-9);
+        }
+        // Half a metre before it the carrot is 0.1 m round the corner, at (4, 0.1): facing the
+        // carrot, the camera looks past the bend (at the wall beyond it, in a corridor)…
+        let carrot = facing_at(&carrot_only, &corner, [3.5, 0.0]);
+        assert!((carrot - 0.1f64.atan2(0.5)).abs() < 1e-9, "{carrot}");
+        // …facing the path 1 m ahead, (4, 0.5), it looks half way into the bend.
+        let view = facing_at(&ahead, &corner, [3.5, 0.0]);
+        assert!((view - FRAC_PI_4).abs() < 1e-9, "{view}");
+        // Never more than the resume threshold off the carrot (the drone would stop and turn):
+        // round a bend of 108° the path 2 m ahead lies at 89° from (3.5, 0).
+        let back = [[0.0, 0.0], [4.0, 0.0], [3.0, 3.0]];
+        let far = FollowerConfig {
+            view_m: 2.0,
+            ..carrot_only.clone()
+        };
+        let carrot = facing_at(&carrot_only, &back, [3.5, 0.0]);
+        let view = facing_at(&far, &back, [3.5, 0.0]);
+        assert!(
+            (view - carrot - far.resume_threshold_rad).abs() < 1e-9,
+            "{view} {carrot}"
+        );
+        // Where the path ends within the carrot's reach, the carrot is faced.
+        let short = [[0.0, 0.0], [0.3, 0.3]];
+        let end = facing_at(&ahead, &short, [0.0, 0.0]);
+        assert!((end - FRAC_PI_4).abs() < 1e-9, "{end}");
+    }
+
+    /// The heading and speed limit the follower with `config` flies at `at`, facing +x, on
+    /// `path`.
+    fn track_at(config: FollowerConfig, path: Vec<[f64; 2]>, at: [f64; 2]) -> (f64, f64) {
         let mut f = PathFollower::new(config);
         f.set_path(path);
         match f.step(pose(at[0], at[1], 0.0)) {
-            Follow::Track { speed_mps, .. } => speed_mps,
+            Follow::Track { yaw, speed_mps, .. } => (yaw, speed_mps),
             c => panic!("{c:?}"),
         }
+    }
+
+    /// The speed limit the follower with `config` sets at `at` facing +x on `path`.
+    fn speed_at(config: FollowerConfig, path: Vec<[f64; 2]>, at: [f64; 2]) -> f64 {
+        track_at(config, path, at).1
     }
 
     #[test]

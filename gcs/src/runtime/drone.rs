@@ -351,6 +351,7 @@ impl Default for DroneConfig {
                 // over 24 with fewer collisions; `docs/benchmarks.md`, stop 72).
                 turn_threshold_rad: 90f64.to_radians(),
                 resume_threshold_rad: 60f64.to_radians(),
+                view_m: 1.0,
                 ..FollowerConfig::default()
             },
             cruise_ff: 0.175,
