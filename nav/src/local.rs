@@ -290,7 +290,7 @@ impl PathFollower {
             left = (left - len).min(corner);
             from = to;
         }
-        self.path[self.path.len() - 1]
+        self.path.last().copied().unwrap_or(from)
     }
 
     /// How far along the path from `nearest` (on segment `segment`) its next bend sharper than

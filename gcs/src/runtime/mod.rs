@@ -76,8 +76,9 @@ pub struct RuntimeConfig {
     /// the look's end ([`Drone::awaits_plan`]). Off by default (`gcs explore
     /// --plan-when-looked true`): on true poses, over 48 seeds side by side, four drones
     /// finished 4.6 s and one drone 5.7 s sooner with no collision, but on SLAM poses the main
-    /// command gained nothing over 24 seeds and had 4 collisions of drones the SLAM had lost,
-    /// against none (`docs/benchmarks.md`, stop 84).
+    /// command, over 79 seeds side by side, was 3.8 s a mission sooner and had 6 collisions of
+    /// drones the SLAM had lost or nearly lost, against 1 (`docs/benchmarks.md`, stops 84
+    /// and 85).
     pub plan_when_looked: bool,
     /// Every drone's controllers and behaviour.
     pub drone: DroneConfig,
