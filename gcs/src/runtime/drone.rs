@@ -178,11 +178,11 @@ pub struct DroneConfig {
     pub cruise_ff: f64,
     /// Pursuing a carrot, the roll and pitch sticks lean this much per m/s that the filter's
     /// velocity is off the one the drone should fly (toward the carrot at the speed the
-    /// follower allows): the speed loop that
-    /// holds the follower's limits, above them and below. Without it the proportional term's
-    /// lean toward a carrot 0.4 m ahead came on top of the feed-forward, and the simulated
-    /// drone cruised at 0.8–0.9 m/s under a 0.7 m/s limit and took the 0.3 m/s bends at 0.45.
-    /// 0 (the default): no speed loop, that position loop with only overspeed braked.
+    /// follower allows): the speed loop that holds the follower's limits, above them and
+    /// below. 0 (the default): no speed loop, but the position loop, whose lean toward a
+    /// carrot 0.4 m ahead comes on top of the feed-forward, with only overspeed braked: the
+    /// simulated drone cruises at 0.8–0.9 m/s under a 0.7 m/s limit, and takes the 0.3 m/s
+    /// bends at about 0.45.
     pub speed_gain: f64,
     /// Pose filter.
     pub ekf: EkfConfig,
@@ -330,7 +330,7 @@ impl DroneConfig {
     /// by default: with `--max-speed 0.8` it took four drones on true poses 65.4 s against
     /// 71.2 s, but one of them, cruising at the limit down the corridor, turned hard onto a
     /// new path whose carrot lay 0.2 m off the wall, flew to it at full speed and touched the
-    /// wall, where none had in 96 missions before (stop 86, `docs/benchmarks.md`).
+    /// wall, where none had in stop 84's 96 missions (stop 86, `docs/benchmarks.md`).
     pub const SPEED_LOOP_GAIN: f64 = 0.6;
 }
 
@@ -485,7 +485,7 @@ enum Target {
 /// [`DroneConfig::speed_gain`] per m/s it is off, at most the x/y output limit long. (Not
 /// slower where `keep_clear` shortens the lead near a wall: that halved the speed within
 /// 0.6 m of any wall, through every door and along every room's walls, and main-command
-/// missions took 14 s longer.)
+/// missions took 13.6 s longer over 10 pairs.)
 fn speed_loop(
     ahead: [f64; 2],
     speed_mps: f64,
