@@ -117,7 +117,8 @@ pub struct SimArgs {
     /// (`RuntimeConfig::plan_when_looked`).
     #[arg(long, value_name = "BOOL", default_value_t = RuntimeConfig::default().plan_when_looked, action = clap::ArgAction::Set)]
     pub plan_when_looked: bool,
-    /// A drone flies nowhere faster than this, m/s (slower into a sharp bend of its path).
+    /// The speed the path follower allows a drone anywhere, m/s (less into a sharp bend of its
+    /// path). Held with `--speed-loop true`; without it, drones cruise up to 0.15 m/s over it.
     #[arg(long, value_name = "M_PER_S", default_value_t = DroneConfig::default().follower.max_speed_mps)]
     pub max_speed: f64,
     /// Flying, a drone's camera faces its path this far ahead, round the path's bends, metres
