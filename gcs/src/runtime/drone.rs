@@ -1700,7 +1700,7 @@ impl Drone {
         let velocity = self.ekf.valid_velocity();
         // Pursuing a carrot with a velocity to fly on, the speed loop flies it instead of the
         // position loop: the velocity toward the carrot (the steer point) at the speed allowed.
-        let speed_loop = match velocity {
+        let flies_velocity = match velocity {
             Some(v) if cruise && speed.is_finite() && config.speed_gain > 0.0 => {
                 let [bx, by] = speed_loop(ahead, speed, v, config);
                 let (s, co) = estimate.yaw.sin_cos();
@@ -1710,7 +1710,7 @@ impl Drone {
             }
             _ => false,
         };
-        if cruise && !speed_loop && lead > 1e-6 && speed.is_finite() {
+        if cruise && !flies_velocity && lead > 1e-6 && speed.is_finite() {
             // Toward the carrot (the steer point), in the body frame.
             let push = config.cruise_ff * speed / lead;
             let (s, co) = estimate.yaw.sin_cos();
@@ -1736,7 +1736,7 @@ impl Drone {
             let [wx, wy] = self.map.as_ref().map_or([0.0; 2], |map| {
                 brake_toward_walls(map, here, velocity, &config.keep_clear)
             });
-            let [sx, sy] = if self.tracking && !speed_loop {
+            let [sx, sy] = if self.tracking && !flies_velocity {
                 brake_to_speed(velocity, self.speed_limit, &config.keep_clear)
             } else if self.landing_by.braking() {
                 // Braking to land: to a stop, as hard as for a wall.
