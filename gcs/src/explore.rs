@@ -118,7 +118,8 @@ pub struct SimArgs {
     #[arg(long, value_name = "BOOL", default_value_t = RuntimeConfig::default().plan_when_looked, action = clap::ArgAction::Set)]
     pub plan_when_looked: bool,
     /// The speed the path follower allows a drone anywhere, m/s (less into a sharp bend of its
-    /// path). Held with `--speed-loop true`; without it, drones cruise up to 0.15 m/s over it.
+    /// path). Held by the speed loop; with `--speed-loop false`, drones cruise up to 0.15 m/s
+    /// over it.
     #[arg(long, value_name = "M_PER_S", default_value_t = DroneConfig::default().follower.max_speed_mps)]
     pub max_speed: f64,
     /// Flying, a drone's camera faces its path this far ahead, round the path's bends, metres
@@ -126,8 +127,9 @@ pub struct SimArgs {
     #[arg(long, value_name = "M", default_value_t = DroneConfig::default().follower.view_m)]
     pub view_ahead: f64,
     /// Pursuing its path, a drone flies a velocity (the speed allowed, toward the point it
-    /// flies to) instead of a position, so `--max-speed` holds (`DroneConfig::speed_gain`).
-    /// Off by default: faster on true poses, but one collision where none had been.
+    /// flies to, no faster toward a wall than it can stop short of it) instead of a position,
+    /// so `--max-speed` holds (`DroneConfig::speed_gain`); `false`: the position loop, as
+    /// before stop 87 (with `--max-speed 0.7`).
     #[arg(long, value_name = "BOOL", default_value_t = DroneConfig::default().speed_gain > 0.0, action = clap::ArgAction::Set)]
     pub speed_loop: bool,
     /// How a drone looks around at a goal: turning the short way to what the map shows
@@ -1033,10 +1035,10 @@ mod tests {
     }
 
     #[test]
-    fn the_speed_loop_is_off_unless_asked_for() {
-        assert!(!parse(&[]).sim.speed_loop);
-        assert_eq!(DroneConfig::default().speed_gain, 0.0);
-        assert!(parse(&["--speed-loop", "true"]).sim.speed_loop);
+    fn the_speed_loop_is_on_unless_turned_off() {
+        assert!(parse(&[]).sim.speed_loop);
+        assert!(DroneConfig::default().speed_gain > 0.0);
+        assert!(!parse(&["--speed-loop", "false"]).sim.speed_loop);
         assert!(Cli::try_parse_from(["explore", "--speed-loop", "fast"]).is_err());
     }
 }

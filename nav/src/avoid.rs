@@ -12,7 +12,8 @@
 //! jamb with the SLAM pose only 6 cm off. The setpoint it gives is worked out from the drone's
 //! position, so it moves with the drone and no derivative term brakes a drift toward a wall;
 //! [`brake_toward_walls`] does, limiting the speed toward each wall near the drone to what can
-//! still stop short of it.
+//! still stop short of it. A drone that flies a velocity has it cut the same way before it
+//! leans: [`limit_approach`], to what can stop within its [`free_run`].
 
 use crate::grid::{Cell, Grid};
 
@@ -155,6 +156,77 @@ pub fn brake_toward_walls(
         ];
     }
     push
+}
+
+/// The velocity `want` (map frame, m/s) for a drone at `position`, no faster than can still
+/// stop short of the walls the map knows ahead: at most `approach_per_s` times the
+/// [`free_run`] toward it. Head-on to a wall that is the approach [`brake_toward_walls`]
+/// allows (`approach_per_s` per metre beyond `stop_at_m`); along a wall, or through a door's
+/// middle, the run is free and the speed kept. A velocity that is not finite is returned as it
+/// is.
+///
+/// For a drone flying a velocity ([`brake_toward_walls`] brakes one that already moves): a
+/// speed loop flying at full speed toward a steer point 0.2 m off a wall, from 0.5 m, leaned
+/// its whole output at the wall, beyond what the wall brake can hold, and touched it at
+/// 0.6 m/s (true poses).
+pub fn limit_approach(
+    map: &Grid,
+    position: [f64; 2],
+    want: [f64; 2],
+    keep: &KeepClear,
+) -> [f64; 2] {
+    let speed = want[0].hypot(want[1]);
+    if !(speed.is_finite() && speed > 1e-9 && keep.approach_per_s > 0.0) {
+        return want;
+    }
+    let direction = [want[0] / speed, want[1] / speed];
+    let reach = speed / keep.approach_per_s;
+    let run = free_run(map, position, direction, reach, keep.stop_at_m);
+    if run < reach {
+        let allowed = keep.approach_per_s * run;
+        [direction[0] * allowed, direction[1] * allowed]
+    } else {
+        want
+    }
+}
+
+/// How far (metres, at most `reach_m`) a drone at `position` can fly along the unit
+/// `direction` before its centre comes nearer than `stop_at_m` to a wall the map knows (or, if
+/// it is already nearer, nearer than it is): stepped at half the map's cells. Off the map,
+/// or with no distance to keep, the whole reach.
+pub fn free_run(
+    map: &Grid,
+    position: [f64; 2],
+    direction: [f64; 2],
+    reach_m: f64,
+    stop_at_m: f64,
+) -> f64 {
+    if !(stop_at_m > 0.0 && reach_m > 0.0) {
+        return reach_m.max(0.0);
+    }
+    let nearest = |p: [f64; 2]| {
+        walls_near(map, p, stop_at_m)
+            .iter()
+            .map(|&(_, d)| d)
+            .fold(f64::INFINITY, f64::min)
+    };
+    // Already nearer than `stop_at_m` (pushed out by `keep_clear`): no nearer, with a little
+    // slack for the cells' corners passing by.
+    let floor = nearest(position).min(stop_at_m) - 1e-3;
+    let step = map.resolution() / 2.0;
+    let mut run = 0.0;
+    while run < reach_m {
+        let next = (run + step).min(reach_m);
+        let p = [
+            position[0] + direction[0] * next,
+            position[1] + direction[1] * next,
+        ];
+        if nearest(p) < floor {
+            return run;
+        }
+        run = next;
+    }
+    reach_m
 }
 
 /// A stick push (map-frame x and y, as [`brake_toward_walls`] gives) that brakes a drone
@@ -413,6 +485,68 @@ mod tests {
         // At the wall, fast: as hard as allowed and no more.
         let hard = brake_toward_walls(&g, [1.75, 2.0], [2.0, 0.5], &keep);
         assert!((hard[0] + keep.brake_max).abs() < 1e-9 && hard[1].abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_velocity_toward_a_near_wall_is_cut_to_what_can_stop_short_of_it() {
+        let g = wall_east(4.0);
+        let keep = KeepClear::default();
+        let close = |v: [f64; 2], to: [f64; 2]| (v[0] - to[0]).hypot(v[1] - to[1]) < 0.03;
+        // 0.5 m from the wall's face, head-on at 0.8 m/s: 1.5 × (0.5 − 0.25) = 0.375 m/s, as
+        // the wall brake allows.
+        let v = limit_approach(&g, [1.5, 2.0], [0.8, 0.0], &keep);
+        assert!(close(v, [0.375, 0.0]), "{v:?}");
+        // At 45° toward it: 0.354 m to run before 0.25 m off it, so 0.53 m/s, the same 0.375 m/s
+        // toward it, in the same direction.
+        let d = std::f64::consts::FRAC_1_SQRT_2;
+        let v = limit_approach(&g, [1.5, 2.0], [0.8 * d, 0.8 * d], &keep);
+        assert!(close(v, [0.375, 0.375]), "{v:?}");
+        // Along it, even nearer than it may approach; away from it; slow enough; far from it;
+        // nothing to limit: as asked.
+        for (p, want) in [
+            ([1.8, 2.0], [0.0, 0.8]),
+            ([1.5, 2.0], [-0.8, 0.2]),
+            ([1.8, 2.0], [-0.3, 0.5]),
+            ([1.5, 2.0], [0.3, 0.0]),
+            ([0.5, 2.0], [0.8, 0.0]),
+            ([1.5, 2.0], [0.0, 0.0]),
+        ] {
+            assert_eq!(limit_approach(&g, p, want, &keep), want, "{p:?}, {want:?}");
+        }
+        // Nearer than it may approach, toward it: stopped.
+        let v = limit_approach(&g, [1.8, 2.0], [0.5, 0.3], &keep);
+        assert!(v[0].hypot(v[1]) < 1e-9, "{v:?}");
+        let nan = limit_approach(&g, [1.8, 2.0], [f64::NAN, 0.0], &keep);
+        assert!(nan[0].is_nan());
+    }
+
+    #[test]
+    fn past_the_end_of_a_wall_the_run_is_free() {
+        // The wall ends at y = 2.0; flying north 0.3 m west of it, from beside it to past it.
+        let g = wall_east(2.0);
+        assert_eq!(free_run(&g, [1.7, 1.0], [0.0, 1.0], 2.0, 0.25), 2.0);
+        // Flying east just past its end: nothing ahead either.
+        assert_eq!(free_run(&g, [1.0, 2.3], [1.0, 0.0], 2.0, 0.25), 2.0);
+        // Flying east toward it, 1 m from it: 0.75 m, to a step.
+        let run = free_run(&g, [1.0, 1.0], [1.0, 0.0], 2.0, 0.25);
+        assert!((run - 0.75).abs() <= 0.025 + 1e-9, "{run}");
+    }
+
+    #[test]
+    fn in_a_corner_a_velocity_is_cut_toward_both_walls() {
+        // The wall along x = 2.0 up to y = 2.0, and one along y = 2.0–2.05 west of it.
+        let mut g = wall_east(2.05);
+        for x in 0..40 {
+            g.set((x, 40), Cell::Occupied);
+        }
+        let keep = KeepClear::default();
+        // 0.3 m from either wall, flying into the corner: 0.07 m before 0.25 m off both, so
+        // about 0.1 m/s.
+        let v = limit_approach(&g, [1.7, 1.7], [0.6, 0.6], &keep);
+        assert!(
+            v[0].hypot(v[1]) < 0.11 && (v[0] - v[1]).abs() < 1e-9,
+            "{v:?}"
+        );
     }
 
     #[test]

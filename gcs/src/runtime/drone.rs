@@ -10,7 +10,7 @@ use std::time::Duration;
 use link::{Command, CommandError, FlightMode, LinkState, Sticks, Telemetry, VehicleLink};
 use nalgebra::Isometry3;
 use nav::Grid;
-use nav::avoid::{KeepClear, brake_to_speed, brake_toward_walls, keep_clear};
+use nav::avoid::{KeepClear, brake_to_speed, brake_toward_walls, keep_clear, limit_approach};
 use nav::control::{PidGains, Pose3, PositionController, PositionGains};
 use nav::local::{Follow, FollowerConfig, PathFollower, Pose2, wrap_angle};
 use nav::mission::SAME_FRONTIER_M;
@@ -179,11 +179,16 @@ pub struct DroneConfig {
     /// Pursuing a carrot, the roll and pitch sticks lean this much per m/s that the filter's
     /// velocity is off the one the drone should fly (toward the carrot at the speed the
     /// follower allows): the speed loop that holds the follower's limits, above them and
-    /// below. 0 (the default): no speed loop, but the position loop, whose lean toward a
-    /// carrot 0.4 m ahead comes on top of the feed-forward, with only overspeed braked: the
-    /// simulated drone cruises at 0.8–0.9 m/s under a 0.7 m/s limit, and takes the 0.3 m/s
-    /// bends at about 0.45.
+    /// below ([`DroneConfig::SPEED_LOOP_GAIN`] by default). 0: no speed loop, but the
+    /// position loop, whose lean toward a carrot 0.4 m ahead comes on top of the
+    /// feed-forward, with only overspeed braked: the simulated drone cruises at 0.8–0.9 m/s
+    /// under a 0.7 m/s limit, and takes the 0.3 m/s bends at about 0.45.
     pub speed_gain: f64,
+    /// The speed loop leans the drone at most this much (stick, the length of roll and
+    /// pitch together; the x/y output limit caps it too): a gentler way up to speed. At the
+    /// output limit's 0.5, drones leaned more than 0.3 stick 2.3 times as long as under the
+    /// position loop, and more of the SLAM's losses began just after such a lean.
+    pub speed_lean_max: f64,
     /// Pose filter.
     pub ekf: EkfConfig,
     /// Holding still (a look around, a turn, a hover), an error under this is not flown: the
@@ -325,12 +330,12 @@ pub struct DroneConfig {
 }
 
 impl DroneConfig {
-    /// [`DroneConfig::speed_gain`] with the speed loop on (`gcs explore --speed-loop true`):
-    /// the damping of a hold (the x/y derivative gain), back to the speed in about 0.4 s. Off
-    /// by default: with `--max-speed 0.8` it took four drones on true poses 65.4 s against
-    /// 71.2 s, but one of them, cruising at the limit down the corridor, turned hard onto a
-    /// new path whose carrot lay 0.2 m off the wall, flew to it at full speed and touched the
-    /// wall, where none had in stop 84's 96 missions (stop 86, `docs/benchmarks.md`).
+    /// [`DroneConfig::speed_gain`] with the speed loop on (the default; `gcs explore
+    /// --speed-loop false` turns it off): the damping of a hold (the x/y derivative gain),
+    /// back to the speed in about 0.4 s. With its approach to walls cut to what can stop short
+    /// of them and its lean to 0.35 stick, at 0.8 m/s, it took four drones on true poses
+    /// 65.9 s against the position loop's 71.2 s under 0.7, with no collision
+    /// (`docs/benchmarks.md`, stop 87).
     pub const SPEED_LOOP_GAIN: f64 = 0.6;
 }
 
@@ -370,11 +375,14 @@ impl Default for DroneConfig {
                 turn_threshold_rad: 90f64.to_radians(),
                 resume_threshold_rad: 60f64.to_radians(),
                 view_m: 1.0,
+                // Held by the speed loop: what the drones had cruised at under the position
+                // loop's 0.7 (`DroneConfig::SPEED_LOOP_GAIN`).
+                max_speed_mps: 0.8,
                 ..FollowerConfig::default()
             },
             cruise_ff: 0.175,
-            // Off: see `DroneConfig::SPEED_LOOP_GAIN`.
-            speed_gain: 0.0,
+            speed_gain: Self::SPEED_LOOP_GAIN,
+            speed_lean_max: 0.35,
             ekf: EkfConfig::default(),
             hold_band_m: 0.1,
             keep_clear: KeepClear::default(),
@@ -479,32 +487,32 @@ enum Target {
     Hold([f64; 2]),
 }
 
-/// The speed loop of a drone pursuing a carrot `ahead` of it (the steer point's lead, map
-/// frame, metres) at `velocity` (m/s): the lean (map frame, stick) that flies it toward the
-/// carrot at `speed_mps`, the drag's feed-forward for that velocity and
-/// [`DroneConfig::speed_gain`] per m/s it is off, at most the x/y output limit long. (Not
-/// slower where `keep_clear` shortens the lead near a wall: that halved the speed within
-/// 0.6 m of any wall, through every door and along every room's walls, and main-command
-/// missions took 13.6 s longer over 10 pairs.)
-fn speed_loop(
-    ahead: [f64; 2],
-    speed_mps: f64,
-    velocity: [f64; 2],
-    config: &DroneConfig,
-) -> [f64; 2] {
+/// The velocity (map frame, m/s) toward a carrot `ahead` of a drone (the steer point's lead,
+/// map frame, metres) at `speed_mps`; none for no lead.
+fn carrot_velocity(ahead: [f64; 2], speed_mps: f64) -> [f64; 2] {
     let lead = ahead[0].hypot(ahead[1]);
-    let want = if lead > 1e-9 {
+    if lead > 1e-9 {
         [ahead[0] * speed_mps / lead, ahead[1] * speed_mps / lead]
     } else {
         [0.0; 2]
-    };
+    }
+}
+
+/// The speed loop of a drone pursuing a carrot: the lean (map frame, stick) that flies it at
+/// `want` (m/s; [`carrot_velocity`], its approach to near walls cut by
+/// [`nav::avoid::limit_approach`]) from `velocity`: the drag's feed-forward for `want` and
+/// [`DroneConfig::speed_gain`] per m/s it is off, at most [`DroneConfig::speed_lean_max`]
+/// long. (Not slower where `keep_clear` shortens the lead near a wall: that halved the speed
+/// within 0.6 m of any wall, through every door and along every room's walls, and
+/// main-command missions took 13.6 s longer over 10 pairs.)
+fn speed_loop(want: [f64; 2], velocity: [f64; 2], config: &DroneConfig) -> [f64; 2] {
     let (kf, kv) = (config.cruise_ff, config.speed_gain);
     let lean = [
         kf * want[0] + kv * (want[0] - velocity[0]),
         kf * want[1] + kv * (want[1] - velocity[1]),
     ];
     let length = lean[0].hypot(lean[1]);
-    let limit = config.gains.x.output_limit;
+    let limit = config.gains.x.output_limit.min(config.speed_lean_max);
     if length > limit {
         [lean[0] * limit / length, lean[1] * limit / length]
     } else {
@@ -1699,10 +1707,15 @@ impl Drone {
         let speed = self.speed_limit.min(config.follower.max_speed_mps);
         let velocity = self.ekf.valid_velocity();
         // Pursuing a carrot with a velocity to fly on, the speed loop flies it instead of the
-        // position loop: the velocity toward the carrot (the steer point) at the speed allowed.
+        // position loop: the velocity toward the carrot (the steer point) at the speed allowed,
+        // no faster toward a wall than can stop short of it.
         let flies_velocity = match velocity {
             Some(v) if cruise && speed.is_finite() && config.speed_gain > 0.0 => {
-                let [bx, by] = speed_loop(ahead, speed, v, config);
+                let want = carrot_velocity(ahead, speed);
+                let want = self.map.as_ref().map_or(want, |map| {
+                    limit_approach(map, here, want, &config.keep_clear)
+                });
+                let [bx, by] = speed_loop(want, v, config);
                 let (s, co) = estimate.yaw.sin_cos();
                 c.pitch = co * bx + s * by;
                 c.roll = s * bx - co * by;
@@ -2453,33 +2466,41 @@ mod tests {
 
     #[test]
     fn the_speed_loop_asks_for_the_speed_allowed_toward_the_carrot() {
-        let config = speed_loop_config();
+        let config = DroneConfig::default();
         let (kf, kv) = (config.cruise_ff, config.speed_gain);
         let ahead = [0.4, 0.0];
         // At 0.7 m/s: the drag's feed-forward, no more; slower, a lean forward by 0.6 stick
-        // per m/s short; faster, less than the drag takes, down to leaning back.
+        // per m/s short; faster, less than the drag takes, down to leaning back; never more
+        // than the loop's lean allows (0.35 stick).
+        let most = config.speed_lean_max;
         for v in [0.0, 0.3, 0.7, 1.0, 1.5] {
-            let [x, y] = speed_loop(ahead, 0.7, [v, 0.0], &config);
-            let lean = (kf * 0.7 + kv * (0.7 - v)).clamp(-0.5, 0.5);
+            let [x, y] = speed_loop(carrot_velocity(ahead, 0.7), [v, 0.0], &config);
+            let lean = (kf * 0.7 + kv * (0.7 - v)).clamp(-most, most);
             assert!((x - lean).abs() < 1e-9 && y == 0.0, "at {v} m/s: {x}, {y}");
         }
-        assert!(speed_loop(ahead, 0.7, [1.0, 0.0], &config)[0] < 0.0);
+        assert!(speed_loop(carrot_velocity(ahead, 0.7), [1.0, 0.0], &config)[0] < 0.0);
         // Drifting sideways at 0.2 m/s: braked across the path as well.
-        let [_, y] = speed_loop(ahead, 0.7, [0.7, 0.2], &config);
+        let [_, y] = speed_loop(carrot_velocity(ahead, 0.7), [0.7, 0.2], &config);
         assert!((y + kv * 0.2).abs() < 1e-9, "{y}");
         // A carrot 45° off: the lean is toward it, whatever the lead's length.
-        let [x, y] = speed_loop([0.1, 0.1], 0.5, [0.0; 2], &config);
+        let [x, y] = speed_loop(carrot_velocity([0.1, 0.1], 0.5), [0.0; 2], &config);
         assert!((x - y).abs() < 1e-9 && x.hypot(y) > 0.3, "{x}, {y}");
         // No lead: brake to a stop.
-        let [x, _] = speed_loop([0.0; 2], 0.7, [0.4, 0.0], &config);
+        let [x, _] = speed_loop(carrot_velocity([0.0; 2], 0.7), [0.4, 0.0], &config);
         assert!((x + kv * 0.4).abs() < 1e-9, "{x}");
     }
 
-    /// The default settings with the speed loop on.
-    fn speed_loop_config() -> DroneConfig {
+    /// The settings before the speed loop: the position loop, under the 0.7 m/s it had
+    /// (`gcs explore --speed-loop false --max-speed 0.7`).
+    fn position_loop_config() -> DroneConfig {
+        let config = DroneConfig::default();
         DroneConfig {
-            speed_gain: DroneConfig::SPEED_LOOP_GAIN,
-            ..DroneConfig::default()
+            speed_gain: 0.0,
+            follower: FollowerConfig {
+                max_speed_mps: 0.7,
+                ..config.follower.clone()
+            },
+            ..config
         }
     }
 
@@ -2507,19 +2528,64 @@ mod tests {
 
     #[test]
     fn pursuing_a_carrot_the_drone_flies_the_speed_loop() {
-        // Down a straight path at 1 m/s, past its 0.7 m/s limit, facing along it: the pitch
+        // Down a straight path at 1 m/s, past its 0.8 m/s limit, facing along it: the pitch
         // stick is the speed loop's on the filter's velocity, toward the carrot dead ahead.
-        let config = speed_loop_config();
+        let config = DroneConfig::default();
+        let top = config.follower.max_speed_mps;
         let path = [[-4.0, 0.0], [6.0, 0.0]];
         let (pitch, velocity) = cruising(&config, &path, 1.0, 0.0);
-        let [lean, _] = speed_loop([0.4, 0.0], 0.7, velocity, &config);
+        let [lean, _] = speed_loop(carrot_velocity([0.4, 0.0], top), velocity, &config);
         assert!((pitch - lean).abs() < 1e-3, "{pitch} against {lean}");
-        assert!(velocity[0] > 0.7, "faster than allowed: {velocity:?}");
-        // The position loop without it (the default) leans further forward, by 0.07 here:
-        // its pull toward the carrot 0.4 m ahead (0.12 stick) came on top of the feed-forward
-        // and outweighed the brake to the limit, and the simulated drone cruised at 0.8–0.9 m/s.
-        let (pushed, _) = cruising(&DroneConfig::default(), &path, 1.0, 0.0);
+        assert!(velocity[0] > top, "faster than allowed: {velocity:?}");
+        // The position loop, under the same limit, leans further forward: its pull toward the
+        // carrot 0.4 m ahead (0.12 stick) came on top of the feed-forward and outweighed the
+        // brake to the limit, and the simulated drone cruised at 0.8–0.9 m/s under 0.7.
+        let position_loop = DroneConfig {
+            speed_gain: 0.0,
+            ..config.clone()
+        };
+        let (pushed, _) = cruising(&position_loop, &path, 1.0, 0.0);
         assert!(pushed > pitch + 0.05, "{pushed} against {pitch}");
+    }
+
+    #[test]
+    fn the_speed_loop_flies_no_faster_toward_a_near_wall_than_can_stop_short_of_it() {
+        // Hovering at the origin, facing north-east, 0.5 m south of a wall's face (y = 0.5),
+        // given a path north-east toward it (a new path after a turn, its steer point near the wall): the lean north is
+        // for the approach that can still stop short of the wall, 1.5 × (0.5 − 0.25) m/s, not
+        // for the 0.5 m/s north in 0.7 m/s at 45°.
+        let mut map = Grid::new(80, 80, 0.05, [-2.0, -2.0], nav::Cell::Free);
+        for x in 0..80 {
+            map.set((x, 50), nav::Cell::Occupied); // y = 0.50–0.55
+        }
+        let config = DroneConfig::default();
+        let north_lean = |map: Option<Grid>| {
+            let mut drone = exploring_drone(Arc::default(), &config);
+            if let Some(map) = map {
+                drone.set_map(Arc::new(map));
+            }
+            drone.set_plan(Some([5.0, 5.0]), vec![[0.0, 0.0], [5.0, 5.0]], None, 0.0);
+            for i in 1..=10 {
+                let t = 0.1 * f64::from(i);
+                drone.slam_fix(t, [0.0, 0.0, 0.9], std::f64::consts::FRAC_PI_4, None, false);
+                drone.tick(t, &config);
+            }
+            assert!(drone.tracking, "pursuing its carrot");
+            let velocity = drone.ekf.valid_velocity().expect("a velocity");
+            // The sticks' lean in the map frame, north.
+            let sticks = drone.sticks.expect("sticks");
+            let (s, c) = drone.pose().expect("a pose")[3].sin_cos();
+            let north = s * f64::from(sticks.pitch) - c * f64::from(sticks.roll);
+            (north, velocity)
+        };
+        let (walled, velocity) = north_lean(Some(map));
+        let (open, _) = north_lean(None);
+        let (kf, kv) = (config.cruise_ff, config.speed_gain);
+        let allowed = 1.5 * (0.5 - 0.25);
+        let most = kf * allowed + kv * (allowed - velocity[1]);
+        assert!(walled < most + 0.01, "{walled} against at most {most}");
+        assert!(walled > 0.1, "still toward the carrot: {walled}");
+        assert!(open > walled + 0.05, "open {open}, walled {walled}");
     }
 
     #[test]
@@ -2531,7 +2597,7 @@ mod tests {
         // feed-forward is for 0.6 m/s; the speed loop asks for 0.6 m/s toward a carrot 0.1 m
         // round the bend.
         let path = [[-4.0, 0.0], [0.7, 0.0], [0.7, 3.0]];
-        for config in [DroneConfig::default(), speed_loop_config()] {
+        for config in [position_loop_config(), DroneConfig::default()] {
             let no_bend_limit = DroneConfig {
                 follower: FollowerConfig {
                     bend_rad: std::f64::consts::PI,
@@ -2570,7 +2636,7 @@ mod tests {
             let yaw = drone.pose().expect("a pose")[3];
             (f64::from(s.pitch), f64::from(s.roll), yaw)
         };
-        let config = DroneConfig::default();
+        let config = position_loop_config();
         let off = DroneConfig {
             cruise_ff: 0.0,
             ..config.clone()
@@ -2589,16 +2655,22 @@ mod tests {
 
     #[test]
     fn a_new_path_a_few_centimetres_aside_does_not_kick_the_sticks() {
-        let config = DroneConfig::default();
-        let mut drone = exploring_drone(Arc::default(), &config);
+        for config in [position_loop_config(), DroneConfig::default()] {
+            a_new_path_a_few_centimetres_aside_leans_toward_it(&config);
+        }
+    }
+
+    /// A drone cruising east along y = 0 at 0.5 m/s, given a path 8 cm to its left: the lean
+    /// toward it, with `config`, is the loop's for a carrot 8 cm to the side, no more.
+    fn a_new_path_a_few_centimetres_aside_leans_toward_it(config: &DroneConfig) {
+        let mut drone = exploring_drone(Arc::default(), config);
         drone.set_plan(Some([5.0, 0.0]), vec![[0.0, 0.0], [5.0, 0.0]], None, 0.0);
-        // Cruising east along y = 0 at 0.5 m/s.
         let mut t = 0.0;
         let mut roll = 0.0;
         for _ in 0..10 {
             t += 0.1;
             drone.slam_fix(t, [0.5 * t, 0.0, 0.9], 0.0, None, false);
-            drone.tick(t, &config);
+            drone.tick(t, config);
             roll = drone.sticks.expect("sticks").roll;
             assert!(drone.tracking);
         }
@@ -2608,12 +2680,13 @@ mod tests {
         drone.set_plan(Some([5.0, 0.08]), vec![[0.4, 0.08], [5.0, 0.08]], None, t);
         t += 0.1;
         drone.slam_fix(t, [0.5 * t, 0.0, 0.9], 0.0, None, false);
-        drone.tick(t, &config);
+        drone.tick(t, config);
         let s = drone.sticks.expect("sticks");
-        // The proportional part of 8 cm, and the feed-forward's share across the path: it leans
-        // toward the carrot, 0.4 m ahead and 8 cm to the left.
-        let across = config.cruise_ff * config.follower.max_speed_mps * 0.08 / 0.4;
-        let p = config.gains.y.kp * 0.08 + across;
+        // Toward the carrot, 0.4 m ahead and 8 cm to the left. The position loop: the
+        // proportional part of 8 cm, and the feed-forward's share across the path. The speed
+        // loop: the feed-forward and the velocity error of that share of the speed, 0.16 m/s.
+        let across = config.follower.max_speed_mps * 0.08 / 0.4;
+        let p = config.gains.y.kp * 0.08 + (config.cruise_ff + config.speed_gain) * across;
         assert!(
             s.roll < 0.0 && s.roll > -(p + 0.02) as f32,
             "a lean left of about {p}: {s:?}"
