@@ -192,8 +192,8 @@ pub fn limit_approach(
 
 /// How far (metres, at most `reach_m`) a drone at `position` can fly along the unit
 /// `direction` before its centre comes nearer than `stop_at_m` to a wall the map knows (or, if
-/// it is already nearer, nearer than it is): stepped at half the map's cells. Off the map,
-/// or with no distance to keep, the whole reach.
+/// it is already nearer, nearer than it is): stepped at half the map's cells. Off the map
+/// (or once the walk leaves it), or with no distance to keep, the whole reach.
 pub fn free_run(
     map: &Grid,
     position: [f64; 2],
@@ -221,6 +221,11 @@ pub fn free_run(
             position[0] + direction[0] * next,
             position[1] + direction[1] * next,
         ];
+        if map.cell_of(p).is_none() {
+            // Past the map's edge nothing is known: free from there (and the walk ends however
+            // far the reach).
+            return reach_m;
+        }
         if nearest(p) < floor {
             return run;
         }
@@ -530,6 +535,8 @@ mod tests {
         // Flying east toward it, 1 m from it: 0.75 m, to a step.
         let run = free_run(&g, [1.0, 1.0], [1.0, 0.0], 2.0, 0.25);
         assert!((run - 0.75).abs() <= 0.025 + 1e-9, "{run}");
+        // Off the map's west edge, nothing is known, however far it looks.
+        assert_eq!(free_run(&g, [0.5, 1.0], [-1.0, 0.0], 1e12, 0.25), 1e12);
     }
 
     #[test]
