@@ -14,7 +14,6 @@ use std::net::SocketAddr;
 use std::str::FromStr;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::Receiver;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -25,7 +24,7 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 use crate::render::{Camera, render_frame};
 use crate::sim::CameraFrame;
-use crate::stream::{self, Subscribers};
+use crate::stream::{self, Subscribers, Subscription};
 use crate::vehicle::{VehicleParams, body_from_camera};
 use crate::world::World;
 
@@ -210,10 +209,10 @@ impl CameraBridge {
         self.addr
     }
 
-    /// Every frame from now on (dropped when the receiver falls 8 behind), with the pose it
-    /// was rendered at.
-    pub fn subscribe(&self) -> Receiver<Arc<CameraFrame>> {
-        self.subscribers.add(false, 8)
+    /// Every frame from now on (when 4 of a camera's frames wait, its next drops its oldest),
+    /// with the pose it was rendered at.
+    pub fn subscribe(&self) -> Subscription {
+        self.subscribers.add(false, 4)
     }
 }
 

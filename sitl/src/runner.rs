@@ -15,7 +15,6 @@ use std::io::{Read, Write};
 use std::net::SocketAddr;
 use std::str::FromStr;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::mpsc::Receiver;
 use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -27,8 +26,8 @@ use link::{Address, ChannelMap, FlightMode, Sticks, Transport, TransportError};
 
 use crate::autopilot::{Autopilot, AutopilotConfig, RcStats};
 use crate::sensors::Readings;
-use crate::sim::{CameraFrame, Sim, SimConfig, SimError};
-use crate::stream::{self, Subscribers};
+use crate::sim::{Sim, SimConfig, SimError};
+use crate::stream::{self, Subscribers, Subscription};
 use crate::vehicle::{Vehicle, VehicleEvent};
 use crate::world::World;
 
@@ -258,17 +257,17 @@ impl Sitl {
         SimClock(self.shared.clone())
     }
 
-    /// Every camera frame from now on; frames are dropped when the receiver falls 8 behind
-    /// (like a network stream).
-    pub fn subscribe(&self) -> Receiver<Arc<CameraFrame>> {
-        self.shared.subscribers.add(false, 8)
+    /// Every camera frame from now on; when 4 of a camera's frames wait, its next drops its
+    /// oldest (like a network stream: see [`Subscribers::add`]).
+    pub fn subscribe(&self) -> Subscription {
+        self.shared.subscribers.add(false, 4)
     }
 
     /// Every camera frame from now on, none dropped: when the receiver falls 2 behind, simulated
     /// time waits for it (an in-process station whose SLAM must see every frame, whatever the
     /// machine's load — and see it soon: a deeper queue is latency, in simulated time, between
     /// a frame and the pose the vehicle flies on). Drop the receiver to release the simulation.
-    pub fn subscribe_all(&self) -> Receiver<Arc<CameraFrame>> {
+    pub fn subscribe_all(&self) -> Subscription {
         self.shared.subscribers.add(true, 2)
     }
 
