@@ -141,19 +141,14 @@ impl Subscription {
     /// The next frame, waiting as long as it takes; an error once the simulator is gone and
     /// every frame it sent is read.
     pub fn recv(&self) -> Result<Arc<CameraFrame>, RecvError> {
-        loop {
-            match self.recv_timeout(Duration::from_secs(3600)) {
-                Ok(f) => return Ok(f),
-                Err(RecvTimeoutError::Disconnected) => return Err(RecvError),
-                Err(RecvTimeoutError::Timeout) => {}
-            }
-        }
+        self.recv_timeout(Duration::MAX).map_err(|_| RecvError)
     }
 
     /// The next frame, waiting at most `timeout`.
     pub fn recv_timeout(&self, timeout: Duration) -> Result<Arc<CameraFrame>, RecvTimeoutError> {
         let q = &self.0;
-        let deadline = Instant::now() + timeout;
+        // Beyond what an `Instant` holds is for ever.
+        let deadline = Instant::now().checked_add(timeout);
         let mut state = q.lock();
         loop {
             if let Some(f) = state.pop() {
@@ -163,7 +158,9 @@ impl Subscription {
             if state.sender_gone {
                 return Err(RecvTimeoutError::Disconnected);
             }
-            let left = deadline.saturating_duration_since(Instant::now());
+            let left = deadline.map_or(Duration::from_secs(3600), |d| {
+                d.saturating_duration_since(Instant::now())
+            });
             if left.is_zero() {
                 return Err(RecvTimeoutError::Timeout);
             }
