@@ -18,10 +18,12 @@ pub fn wall_clock_mission() -> std::sync::MutexGuard<'static, ()> {
         .unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
-/// Runs `gcs` with `args` and returns what it did.
+/// Runs `gcs` with `args` and returns what it did. Its log is at its default level whatever
+/// `RUST_LOG` the tests run under: the tests read what the vehicles and the station said.
 pub fn gcs(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_gcs"))
         .args(args)
+        .env("RUST_LOG", "info")
         .output()
         .expect("run gcs")
 }
