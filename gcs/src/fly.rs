@@ -10,7 +10,7 @@ use std::io::BufReader;
 use std::net::TcpStream;
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::sync::mpsc::sync_channel;
+use std::sync::mpsc::{SyncSender, sync_channel};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
@@ -19,7 +19,6 @@ use link::camera::RgbdFrame;
 use slam::system::{RobotSetup, Slam, SlamConfig};
 
 use gcs::clock::{Clock, WallClock, link_clock};
-use gcs::feed::Feed;
 use gcs::fleet::{LinkKind, LinkOptions, connect, sim_body_from_camera};
 use gcs::fleet_file::{self, Vehicle};
 use gcs::gui::Station;
@@ -78,8 +77,6 @@ struct FlyDrone {
     path_length_m: f64,
     camera_frames: usize,
     lost_frames: usize,
-    /// Camera frames a newer one replaced before the SLAM had time for them.
-    dropped_frames: u64,
     final_phase: &'static str,
     /// Why it left the mission before the end; `null` if it flew until the end.
     left_mission: Option<String>,
@@ -107,31 +104,8 @@ pub fn run_with(args: &FlyArgs, window: Option<Window>) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create the output folder {}", args.out.display()))?;
     let clock: Arc<dyn Clock> = Arc::new(WallClock::start());
-    // Cameras first (a vehicle is no use without one), then the links. The camera threads
-    // drain their streams into the feed, which keeps each drone's newest frame; the SLAM takes
-    // them as it can (handed over, not queued: a frame waiting is a frame stamped late).
-    let feed = Arc::new(Feed::new(fleet.len()));
-    let (tx, frames) = sync_channel(0);
-    {
-        let feed = feed.clone();
-        std::thread::Builder::new()
-            .name("camera feed".into())
-            .spawn(move || {
-                loop {
-                    match feed.take(Duration::from_millis(100)) {
-                        Some(frame) => {
-                            if tx.send(frame).is_err() {
-                                // The SLAM has stopped.
-                                feed.close();
-                                return;
-                            }
-                        }
-                        None if feed.is_closed() => return,
-                        None => {}
-                    }
-                }
-            })?;
-    }
+    // Cameras first (a vehicle is no use without one), then the links.
+    let (tx, frames) = sync_channel(8);
     let mut streams: BTreeMap<String, Vec<(u8, usize)>> = BTreeMap::new();
     for (k, v) in fleet.iter().enumerate() {
         streams
@@ -140,8 +114,9 @@ pub fn run_with(args: &FlyArgs, window: Option<Window>) -> anyhow::Result<()> {
             .push((v.camera_id, k));
     }
     for (address, routes) in streams {
-        start_camera(&address, routes, feed.clone(), clock.clone())?;
+        start_camera(&address, routes, tx.clone(), clock.clone())?;
     }
+    drop(tx);
     let mut drones = vec![];
     for (k, v) in fleet.iter().enumerate() {
         let tlog = (!args.log.no_log && v.kind == LinkKind::Mavlink)
@@ -239,7 +214,7 @@ pub fn run_with(args: &FlyArgs, window: Option<Window>) -> anyhow::Result<()> {
         }
     );
     let Some(window) = window else {
-        return watch(args, &fleet, runtime, &feed);
+        return watch(args, &fleet, runtime);
     };
     let station = Station::of(
         &runtime,
@@ -249,12 +224,12 @@ pub fn run_with(args: &FlyArgs, window: Option<Window>) -> anyhow::Result<()> {
     let commander = runtime.commander();
     let args = args.clone();
     beside_window(station, window, commander, move || {
-        watch(&args, &fleet, runtime, &feed)
+        watch(&args, &fleet, runtime)
     })
 }
 
 /// Follows the mission to its end, then writes the outputs and prints the summary.
-fn watch(args: &FlyArgs, fleet: &[Vehicle], runtime: Runtime, feed: &Feed) -> anyhow::Result<()> {
+fn watch(args: &FlyArgs, fleet: &[Vehicle], runtime: Runtime) -> anyhow::Result<()> {
     let started = Instant::now();
     let mut next = Duration::ZERO;
     while !runtime.finished() {
@@ -276,10 +251,9 @@ fn watch(args: &FlyArgs, fleet: &[Vehicle], runtime: Runtime, feed: &Feed) -> an
         }
         std::thread::sleep(Duration::from_millis(50));
     }
-    let report = runtime.join();
-    // The cameras and their feed stop with the mission.
-    feed.close();
-    let report = report.context("the mission loop stopped unexpectedly")?;
+    let report = runtime
+        .join()
+        .context("the mission loop stopped unexpectedly")?;
     let perception = report
         .perception
         .context("the SLAM thread stopped unexpectedly")?;
@@ -301,7 +275,6 @@ fn watch(args: &FlyArgs, fleet: &[Vehicle], runtime: Runtime, feed: &Feed) -> an
         )?;
     }
     let stats = perception.slam.stats();
-    let dropped = feed.dropped();
     let summary = FlySummary {
         completed: report.outcome == Some(Outcome::Completed),
         outcome: report.outcome.map_or("stopped", Outcome::name).into(),
@@ -320,7 +293,6 @@ fn watch(args: &FlyArgs, fleet: &[Vehicle], runtime: Runtime, feed: &Feed) -> an
                     path_length_m: d.path_length_m,
                     camera_frames: e.as_ref().map_or(0, |e| e.frames),
                     lost_frames: e.as_ref().map_or(0, |e| e.lost_frames),
-                    dropped_frames: dropped.get(k).copied().unwrap_or(0),
                     final_phase: d.phase.name(),
                     left_mission: d.left_mission.clone(),
                     battery_swaps: d.battery_swaps,
@@ -344,13 +316,12 @@ fn watch(args: &FlyArgs, fleet: &[Vehicle], runtime: Runtime, feed: &Feed) -> an
     Ok(())
 }
 
-/// Reads one camera stream in its own thread, as fast as frames come, and routes them to the
-/// fleet's drones through `feed` (stamped on arrival with the mission clock). Reconnects when
-/// the stream drops.
+/// Reads one camera stream in its own thread and routes its frames to the fleet's drones
+/// (stamped on arrival with the mission clock). Reconnects when the stream drops.
 fn start_camera(
     address: &str,
     routes: Vec<(u8, usize)>,
-    feed: Arc<Feed>,
+    tx: SyncSender<CameraFrame>,
     clock: Arc<dyn Clock>,
 ) -> anyhow::Result<()> {
     let Some(host) = address.strip_prefix("tcpout:") else {
@@ -380,14 +351,8 @@ fn start_camera(
                                         frame: Arc::new(frame),
                                         truth: None,
                                     };
-                                    if feed.is_closed() {
+                                    if tx.send(f).is_err() {
                                         return;
-                                    }
-                                    if feed.put(f).is_err() {
-                                        tracing::warn!(
-                                            "camera {address}: a frame for no drone of the \
-                                             fleet; dropped"
-                                        );
                                     }
                                 }
                                 Err(e) => {

@@ -4,7 +4,6 @@
 
 pub mod clock;
 pub mod evaluate;
-pub mod feed;
 pub mod fleet;
 pub mod fleet_file;
 pub mod gui;
