@@ -188,7 +188,7 @@ impl RecentViews {
         while self
             .views
             .front()
-            .is_some_and(|&(t, _, _)| !(now - t <= VIEWS_WINDOW_S))
+            .is_some_and(|&(t, _, _)| now - t > VIEWS_WINDOW_S)
         {
             self.views.pop_front();
         }
