@@ -267,74 +267,31 @@ impl Proximity {
 
     /// The lean (body frame: forward, left; stick units) that keeps a drone heading `heading`
     /// (radians, IMU) at time `now` off the walls nearer than the margin: away from them, by
-    /// the mean over the directions that range a wall of how far inside the margin that wall
-    /// lies, so a wall seen over many directions counts once and walls either side cancel.
-    ///
-    /// A wall is the line through a direction's range and its neighbours' (when they range a
-    /// wall too): how near it lies is its distance from the drone, not the range along the
-    /// direction, and it is leaned off square. A drone turning beside a wall sees it at a
-    /// slant, its nearest part out of view: the ranges along the directions made it look
-    /// farther and ahead, and the drone leaned along it rather than off it (in SITL a blind
-    /// drone 0.23 m from a wall, facing 1 rad off it, leaned back by 0.057 stick, mostly
-    /// along the wall, and drifted into it).
+    /// the mean of the directions within the margin weighted by how far inside it they are,
+    /// so a wall seen over many directions counts once and walls either side cancel.
     pub fn push(&self, now: f64, heading: f64, config: &ProximityConfig) -> [f64; 2] {
         if !heading.is_finite() {
             return [0.0; 2];
         }
-        let n = self.sectors.len();
-        // Each direction's wall point, IMU frame (ranges at the map's reach say no wall).
-        let point = |k: usize| {
-            let (range, until) = self.sectors[k % n]?;
-            (now <= until && range < config.map_reach_m).then(|| {
-                let (s, c) = (k as f64 * TAU / n as f64).sin_cos();
-                [range * c, range * s]
-            })
-        };
+        let n = self.sectors.len() as f64;
         let (mut sum, mut count) = ([0.0; 2], 0usize);
-        for k in 0..n {
-            let Some(p) = point(k) else {
+        for (k, slot) in self.sectors.iter().enumerate() {
+            let Some((range, until)) = *slot else {
                 continue;
             };
-            let range = p[0].hypot(p[1]);
-            let (before, after) = (point(k + n - 1), point(k + 1));
-            // The wall's direction along it, from the neighbours that range it.
-            let along = match (before, after) {
-                (Some(a), Some(b)) => Some([b[0] - a[0], b[1] - a[1]]),
-                (Some(a), None) => Some([p[0] - a[0], p[1] - a[1]]),
-                (None, Some(b)) => Some([b[0] - p[0], b[1] - p[1]]),
-                (None, None) => None,
-            };
-            // Square off it, toward the wall: the distance to it and the way there.
-            let toward = along
-                .map(|[x, y]| {
-                    let length = x.hypot(y);
-                    [-y / length, x / length]
-                })
-                .filter(|v| v.iter().all(|c| c.is_finite()))
-                .map(|v| {
-                    if v[0] * p[0] + v[1] * p[1] < 0.0 {
-                        [-v[0], -v[1]]
-                    } else {
-                        v
-                    }
-                })
-                .unwrap_or([p[0] / range, p[1] / range]);
-            let distance = toward[0] * p[0] + toward[1] * p[1];
-            let inside = config.margin_m - distance;
-            if inside <= 0.0 {
+            let inside = config.margin_m - range;
+            if inside <= 0.0 || now > until {
                 continue;
             }
-            sum[0] -= inside * toward[0];
-            sum[1] -= inside * toward[1];
+            let (s, c) = (k as f64 * TAU / n - heading).sin_cos();
+            sum[0] -= inside * c;
+            sum[1] -= inside * s;
             count += 1;
         }
         if count == 0 {
             return [0.0; 2];
         }
-        // Into the body frame.
-        let (s, c) = heading.sin_cos();
-        let away = sum.map(|v| config.gain * v / count as f64);
-        let lean = [c * away[0] + s * away[1], -s * away[0] + c * away[1]];
+        let lean = sum.map(|v| config.gain * v / count as f64);
         let size = lean[0].hypot(lean[1]);
         if size > config.max {
             lean.map(|v| v * config.max / size)
@@ -453,35 +410,6 @@ mod tests {
         // A heading that is no number (a broken IMU report) leans nowhere rather than NaN.
         assert_eq!(p.push(0.5, f64::NAN, &config), [0.0, 0.0]);
         assert_eq!(p.push(0.5, f64::INFINITY, &config), [0.0, 0.0]);
-    }
-
-    #[test]
-    fn a_wall_seen_at_a_slant_is_leaned_off_square_as_near_as_it_is() {
-        // A wall 0.23 m east of the drone (IMU frame), which faces 1 rad left of it: the
-        // camera sees the wall only from 0.5 to 1.17 rad, its nearest part out of view.
-        let config = ProximityConfig::default();
-        let heading = 1.0;
-        let readings: Vec<Reading> = (0..=13)
-            .map(|i| 0.5 + 0.67 * f64::from(i) / 13.0)
-            .map(|bearing| Reading {
-                bearing_rad: bearing - heading,
-                sight: Sight::Wall(0.23 / bearing.cos()),
-            })
-            .collect();
-        let mut p = Proximity::new(&config);
-        p.observe(0.0, heading, &readings, &config);
-        let [forward, left] = p.push(0.1, heading, &config);
-        // Back into the IMU frame: west, square off the wall…
-        let (s, c) = f64::sin_cos(heading);
-        let away = [c * forward - s * left, s * forward + c * left];
-        let off_west = away[1].atan2(-away[0]);
-        assert!(off_west.abs() < 0.1, "{away:?}: {off_west} rad off square");
-        // …as hard as 0.23 m from it asks.
-        let want = config.gain * (config.margin_m - 0.23);
-        assert!(
-            (away[0].hypot(away[1]) - want).abs() < 0.01,
-            "{away:?}, want {want}"
-        );
     }
 
     #[test]

@@ -163,53 +163,6 @@ impl RecentTurn {
     }
 }
 
-/// The keyframes a lost drone's sweep turns toward: those of the last this many seconds…
-pub const VIEWS_WINDOW_S: f64 = 20.0;
-
-/// …taken within this of its last keyframe, metres ([`DroneConfig::blind_sweep_back_rad`]).
-pub const VIEWS_NEAR_M: f64 = 2.0;
-
-/// Where the drone's recent keyframes were taken, and the IMU heading at each: the views the
-/// map knows near it, which a lost drone's sweep turns toward.
-#[derive(Debug, Clone, Default)]
-struct RecentViews {
-    /// (time, position in the map, heading) per keyframe, oldest first, back
-    /// [`VIEWS_WINDOW_S`].
-    views: VecDeque<(f64, [f64; 2], f64)>,
-}
-
-impl RecentViews {
-    /// Takes a keyframe taken at `now` (seconds) at `at`, the IMU reading `heading` (radians).
-    fn observe(&mut self, now: f64, at: [f64; 2], heading: f64) {
-        if !(now.is_finite() && heading.is_finite() && at.iter().all(|v| v.is_finite())) {
-            return;
-        }
-        self.views.push_back((now, at, heading));
-        while self
-            .views
-            .front()
-            .is_some_and(|&(t, _, _)| now - t > VIEWS_WINDOW_S)
-        {
-            self.views.pop_front();
-        }
-    }
-
-    /// The mean heading (radians) of the views taken within [`VIEWS_NEAR_M`] of `near`;
-    /// `None` when there are none, or they face every way alike.
-    fn mean_heading(&self, near: [f64; 2]) -> Option<f64> {
-        let (mut s, mut c, mut n) = (0.0, 0.0, 0usize);
-        for &(_, at, heading) in &self.views {
-            if (at[0] - near[0]).hypot(at[1] - near[1]) <= VIEWS_NEAR_M {
-                s += heading.sin();
-                c += heading.cos();
-                n += 1;
-            }
-        }
-        // Headings spread round the circle have no side.
-        (n > 0 && s.hypot(c) > 0.25 * n as f64).then(|| s.atan2(c))
-    }
-}
-
 /// Timing and behaviour settings of every drone.
 #[derive(Debug, Clone)]
 pub struct DroneConfig {
@@ -290,20 +243,15 @@ pub struct DroneConfig {
     /// the spot were lost six times as often as flying straight.
     pub look_slow_inliers: usize,
     /// Yaw stick while the SLAM has lost the drone and the turn back found nothing (a slow turn
-    /// so the camera finds known views): toward the views the map knows, …
+    /// so the camera finds known views): clockwise, unless…
     pub blind_yaw: f32,
-    /// … which lie the side of the last keyframe's heading where the mean heading of its
-    /// recent keyframes near it is ([`VIEWS_WINDOW_S`], [`VIEWS_NEAR_M`]), if that is more
-    /// than this off (radians); else, the way it was turning said: back counter-clockwise if
-    /// the drone was turning clockwise by more than this over the last [`TURN_WINDOW_S`]
-    /// before the loss, clockwise otherwise. Swept on clockwise, the camera turned on into
-    /// what it had not seen: in the 72 main-command missions of stop 72, 9 of the 26 drones
-    /// lost for 4 s or more while turning clockwise were found again only on the other side,
-    /// 14–23 s after the loss, most of a turn later; the 18 lost turning counter-clockwise
-    /// and found again were found within 4–8 s. The turn alone does not see a turn broken by
-    /// losses: in stop 89 a drone lost five times in 7 s, turning from −0.4 to −1.8 rad
-    /// between them, swept on clockwise and was found 5.3 rad later, 1 rad counter-clockwise
-    /// of where it began.
+    /// …the drone was turning clockwise by more than this (radians) over the last
+    /// [`TURN_WINDOW_S`] before the loss: then it sweeps back counter-clockwise, over the
+    /// views it turned from, which the map knows. Swept on clockwise, the camera turned on
+    /// into what it had not seen: in the 72 main-command missions of stop 72, 9 of the 26
+    /// drones lost for 4 s or more while turning clockwise were found again only on the
+    /// other side, 14–23 s after the loss, most of a turn later; the 18 lost turning
+    /// counter-clockwise and found again were found within 4–8 s.
     pub blind_sweep_back_rad: f64,
     /// A drone the SLAM loses goes back to where its last keyframe was taken, facing the way it
     /// faced then, if that is within this distance (the camera sees what the keyframe saw;
@@ -756,8 +704,6 @@ pub struct Drone {
     faced_since: Option<f64>,
     /// How it was turning while the SLAM placed it…
     recent_turn: RecentTurn,
-    /// …and which way its recent keyframes faced…
-    recent_views: RecentViews,
     /// …and so, lost, whether it sweeps counter-clockwise ([`DroneConfig::blind_sweep_back_rad`]).
     sweep_back: bool,
     /// The IMU heading at its last SLAM keyframe, radians: where the camera last saw enough
@@ -875,7 +821,6 @@ impl Drone {
             faced_since: None,
             keyframe_heading: None,
             recent_turn: RecentTurn::default(),
-            recent_views: RecentViews::default(),
             sweep_back: false,
             keyframe_yaw: None,
             keyframe_at: None,
@@ -1416,10 +1361,6 @@ impl Drone {
             self.keyframe_yaw = Some(yaw);
             self.keyframe_at = Some([position[0], position[1]]);
             self.keyframe_heading = self.link.telemetry().yaw_rad.map(f64::from);
-            if let Some(heading) = self.keyframe_heading {
-                self.recent_views
-                    .observe(stamp, [position[0], position[1]], heading);
-            }
         }
     }
 
@@ -1949,33 +1890,14 @@ impl Drone {
         None
     }
 
-    /// At a loss (or going blind), which way its sweep will turn, from the heading of its last
-    /// keyframe (where the turn back leaves it): toward its recent keyframes' headings, else
-    /// back counter-clockwise if it was turning clockwise
-    /// ([`DroneConfig::blind_sweep_back_rad`]).
+    /// At a loss (or going blind), which way its sweep will turn: back counter-clockwise if it
+    /// was turning clockwise ([`DroneConfig::blind_sweep_back_rad`]).
     fn choose_sweep(&mut self, config: &DroneConfig) {
-        let toward_views = self
-            .keyframe_heading
-            .zip(self.keyframe_at)
-            .and_then(|(from, at)| {
-                let mean = self.recent_views.mean_heading(at)?;
-                Some(wrap_angle(mean - from))
-            });
-        self.sweep_back = match toward_views {
-            Some(off) if off.abs() > config.blind_sweep_back_rad => off > 0.0,
-            _ => self.recent_turn.turned() < -config.blind_sweep_back_rad,
-        };
-        tracing::debug!(
-            drone = self.id + 1,
-            ?toward_views,
-            turned = self.recent_turn.turned(),
-            counter_clockwise = self.sweep_back,
-            "lost: the way its sweep will turn"
-        );
+        self.sweep_back = self.recent_turn.turned() < -config.blind_sweep_back_rad;
     }
 
-    /// The yaw stick of a lost drone's slow sweep: [`DroneConfig::blind_yaw`], the way
-    /// [`Self::choose_sweep`] chose ([`DroneConfig::blind_sweep_back_rad`]).
+    /// The yaw stick of a lost drone's slow sweep: [`DroneConfig::blind_yaw`], counter-clockwise
+    /// if it was lost turning clockwise ([`DroneConfig::blind_sweep_back_rad`]).
     fn sweep_yaw(&self, config: &DroneConfig) -> f32 {
         if self.sweep_back {
             -config.blind_yaw
@@ -2932,76 +2854,6 @@ mod tests {
         assert_eq!(turn.turned(), 0.0);
         turn.observe(t + 20.1, f64::NAN);
         assert_eq!(turn.turned(), 0.0);
-    }
-
-    #[test]
-    fn the_recent_views_average_near_ones_across_the_wrap_and_forget_old_ones() {
-        let mut views = RecentViews::default();
-        assert_eq!(views.mean_heading([0.0, 0.0]), None);
-        // Either side of ±π: the mean is π, not 0.
-        views.observe(0.0, [0.0, 0.0], 3.0);
-        views.observe(1.0, [0.5, 0.0], -3.0);
-        views.observe(1.5, [0.0, 0.0], f64::NAN);
-        let mean = views.mean_heading([0.0, 0.0]).expect("views near");
-        assert!(
-            wrap_angle(mean - std::f64::consts::PI).abs() < 1e-9,
-            "{mean}"
-        );
-        // A view far off is not one of them.
-        views.observe(2.0, [VIEWS_NEAR_M + 1.0, 0.0], 0.0);
-        let mean = views.mean_heading([0.0, 0.0]).expect("views near");
-        assert!(
-            wrap_angle(mean - std::f64::consts::PI).abs() < 1e-9,
-            "{mean}"
-        );
-        // Facing every way alike, they have no side.
-        views.observe(3.0, [0.0, 0.0], 0.0);
-        views.observe(3.0, [0.0, 0.0], 0.0);
-        assert_eq!(views.mean_heading([0.0, 0.0]), None);
-        // Views older than the window are forgotten: those at 3 s count until 3 s + the window…
-        views.observe(2.5 + VIEWS_WINDOW_S, [0.0, 0.0], 1.0);
-        let mean = views.mean_heading([0.0, 0.0]).expect("views near");
-        let with_old = 1.0f64.sin().atan2(2.0 + 1.0f64.cos());
-        assert!((mean - with_old).abs() < 1e-9, "{mean}");
-        // …and no longer.
-        views.observe(3.5 + VIEWS_WINDOW_S, [0.0, 0.0], 1.0);
-        let mean = views.mean_heading([0.0, 0.0]).expect("views near");
-        assert!((mean - 1.0).abs() < 1e-9, "{mean}");
-    }
-
-    #[test]
-    fn a_drone_lost_again_and_again_sweeps_toward_the_views_it_turned_from() {
-        // It turns clockwise from −0.4 to −1.6 rad, found and lost in turn (each loss resets
-        // what the turn says), then holds −1.6 rad for 2 s and is lost for good: its views are
-        // counter-clockwise of it, so its sweep turns that way.
-        let config = DroneConfig::default();
-        let vehicle = Arc::new(StubbornVehicle::default());
-        let mut drone = exploring_drone(vehicle.clone(), &config);
-        drone.set_plan(Some([5.0, 0.0]), vec![[0.0, 0.0], [5.0, 0.0]], None, 0.0);
-        let heading_at = |t: f64| -0.4 - 1.2 * (t / 12.0).min(1.0);
-        let mut t: f64 = 0.0;
-        while t < 14.0 {
-            t += 0.1;
-            *vehicle.yaw.lock().unwrap() = Some(heading_at(t) as f32);
-            if t < 12.0 && t % 2.0 > 1.4 {
-                drone.slam_lost(t, &config);
-            } else {
-                drone.slam_fix(t, [0.0, 0.0, 0.9], heading_at(t), None, true);
-            }
-            drone.tick(t, &config);
-        }
-        assert!(
-            drone.recent_turn.turned().abs() < config.blind_sweep_back_rad,
-            "the turn alone says clockwise"
-        );
-        let lost = t;
-        while t < lost + config.blind_face_s + 1.0 {
-            t += 0.1;
-            drone.slam_lost(t, &config);
-            drone.slam_odometry(t - 0.1, t, &Isometry3::identity());
-            drone.tick(t, &config);
-        }
-        assert_eq!(drone.sticks.expect("sticks").yaw, -config.blind_yaw);
     }
 
     #[test]
