@@ -1295,7 +1295,7 @@ impl Drone {
             None => {
                 self.slam_lost(fix.stamp, config);
                 if let Some(o) = &fix.odometry {
-                    self.slam_odometry(o.since, fix.stamp, &o.previous_from_body);
+                    self.slam_odometry(o.since, fix.stamp, &o.previous_from_body, Some(o.inliers));
                 }
             }
         }
@@ -1390,11 +1390,20 @@ impl Drone {
     }
 
     /// Visual odometry while lost: the body moved `previous_from_body` between its frames at
-    /// `since` and `stamp`. The filter flies on it (holding where the SLAM lost the drone,
-    /// going back to the last keyframe) instead of on its model alone.
-    pub fn slam_odometry(&mut self, since: f64, stamp: f64, previous_from_body: &Isometry3<f64>) {
+    /// `since` and `stamp`, registered on `inliers` matches if known (fewer count for less:
+    /// [`EkfConfig::odometry_full_inliers`]). The filter flies on it (holding where
+    /// the SLAM lost the drone, going back to the last keyframe) instead of on its model alone.
+    pub fn slam_odometry(
+        &mut self,
+        since: f64,
+        stamp: f64,
+        previous_from_body: &Isometry3<f64>,
+        inliers: Option<usize>,
+    ) {
         let d = previous_from_body.translation.vector;
-        let update = self.ekf.update_odometry(since, stamp, [d.x, d.y]);
+        let update = self
+            .ekf
+            .update_odometry_on(since, stamp, [d.x, d.y], inliers);
         // Blind, what it drifted: as much as the filter believes (a step it gated out as an
         // outlier, a wrong registration, moves no spot held).
         if self.pose().is_none() && update == Update::Applied {
@@ -1407,6 +1416,7 @@ impl Drone {
             stamp,
             forward = d.x,
             left = d.y,
+            ?inliers,
             ?update,
             velocity = ?self.ekf.valid_velocity(),
             pose = self.pose().is_some(),
@@ -2118,6 +2128,7 @@ mod tests {
     use link::{LinkStatus, StatusText};
 
     use super::*;
+    use slam::system::Odometry;
 
     /// A vehicle that accepts every command and stays armed whatever it is told (unless a
     /// test disarms it or changes its mode, as its own failsafe would).
@@ -2811,7 +2822,7 @@ mod tests {
                 t += 0.1;
                 if odometry {
                     drone.slam_lost(t, &config);
-                    drone.slam_odometry(t - 0.1, t, &Isometry3::identity());
+                    drone.slam_odometry(t - 0.1, t, &Isometry3::identity(), None);
                 }
                 drone.tick(t, &config);
                 assert_eq!(drone.pose().is_some(), odometry, "at {t:.1} s");
@@ -2877,7 +2888,7 @@ mod tests {
             while t < lost + config.blind_face_s + 1.0 {
                 t += 0.1;
                 drone.slam_lost(t, &config);
-                drone.slam_odometry(t - 0.1, t, &Isometry3::identity());
+                drone.slam_odometry(t - 0.1, t, &Isometry3::identity(), None);
                 drone.tick(t, &config);
             }
             drone.sticks.expect("sticks").yaw
@@ -2913,7 +2924,7 @@ mod tests {
         while t < 0.3 + config.blind_land_s - 0.5 {
             t += 0.1;
             drone.slam_lost(t, &config);
-            drone.slam_odometry(t - 0.1, t, &Isometry3::identity());
+            drone.slam_odometry(t - 0.1, t, &Isometry3::identity(), None);
             drone.tick(t, &config);
             let pose = drone
                 .pose()
@@ -2935,7 +2946,7 @@ mod tests {
         while t < 0.3 + config.blind_land_s + 0.5 {
             t += 0.1;
             drone.slam_lost(t, &config);
-            drone.slam_odometry(t - 0.1, t, &Isometry3::identity());
+            drone.slam_odometry(t - 0.1, t, &Isometry3::identity(), None);
             drone.tick(t, &config);
         }
         assert_eq!(drone.phase, Phase::Landing, "lost for too long");
@@ -2971,7 +2982,7 @@ mod tests {
             while t < lost + 1.0 {
                 t += 0.1;
                 drone.slam_lost(t, config);
-                drone.slam_odometry(t - 0.1, t, &Isometry3::translation(0.04, 0.0, 0.0));
+                drone.slam_odometry(t - 0.1, t, &Isometry3::translation(0.04, 0.0, 0.0), None);
                 drone.tick(t, config);
                 assert!(drone.pose().is_some(), "flying on odometry");
                 let s = drone.sticks.expect("sticks");
@@ -3041,6 +3052,56 @@ mod tests {
         assert_eq!(drone.lost_since, Some(t));
     }
 
+    #[test]
+    fn a_lost_drone_weighs_its_visual_odometry_by_the_inliers() {
+        // Tracked hovering, then lost and still by visual odometry on many inliers; then one
+        // frame says it moved 6 cm in 0.1 s. On 15 inliers that step moves the filter's
+        // velocity less than half as far as on 120.
+        let config = DroneConfig::default();
+        let velocity_after = |inliers: usize| {
+            let mut drone = exploring_drone(Arc::default(), &config);
+            let frame = |stamp: f64, step: f64, inliers: usize| SlamFix {
+                drone: 0,
+                stamp,
+                map_from_body: None,
+                keyframe: false,
+                inliers: None,
+                weak: false,
+                odometry: Some(Odometry {
+                    since: stamp - 0.1,
+                    previous_from_body: Isometry3::translation(step, 0.0, 0.0),
+                    inliers,
+                }),
+                half_fov_rad: 0.5,
+                ranges: vec![],
+                heading: None,
+            };
+            let mut t = 0.0;
+            while t < 2.0 {
+                t += 0.1;
+                let tracked = SlamFix {
+                    map_from_body: Some(Isometry3::translation(0.0, 0.0, 0.9)),
+                    inliers: Some(120),
+                    odometry: None,
+                    ..frame(t, 0.0, 0)
+                };
+                drone.take_fix(t, &tracked, &config);
+                drone.tick(t, &config);
+            }
+            for _ in 0..5 {
+                t += 0.1;
+                drone.take_fix(t, &frame(t, 0.0, 120), &config);
+                drone.tick(t, &config);
+            }
+            t += 0.1;
+            drone.take_fix(t, &frame(t, 0.06, inliers), &config);
+            drone.ekf.estimate().velocity[0]
+        };
+        let (sound, weak) = (velocity_after(120), velocity_after(15));
+        assert!(sound > 0.3, "{sound}");
+        assert!(weak < 0.5 * sound, "{weak} against {sound}");
+    }
+
     /// Ticks a drone the SLAM has lost at `t`, with nothing to measure its motion, until its
     /// pose expires (it must, within 5 s); returns the time then.
     fn tick_until_the_pose_expires(drone: &mut Drone, mut t: f64, config: &DroneConfig) -> f64 {
@@ -3076,7 +3137,7 @@ mod tests {
                 t += 0.1;
                 drone.slam_lost(t, &config);
                 let moved = Isometry3::translation(forward * 0.1, left * 0.1, 0.0);
-                drone.slam_odometry(t - 0.4, t - 0.3, &moved);
+                drone.slam_odometry(t - 0.4, t - 0.3, &moved, None);
                 drone.tick(t, &config);
                 if drone.pose().is_none() && drone.ekf.valid_velocity().is_some() {
                     return drone.sticks.expect("sticks");
@@ -3143,7 +3204,7 @@ mod tests {
                 // would carry its pose on them).
                 if blind_at.is_some_and(|(since, _)| t > since + 3.0) {
                     let [a, b] = [poses[poses.len() - 4], poses[poses.len() - 3]];
-                    drone.slam_odometry(t - 0.4, t - 0.3, &(a.inverse() * b));
+                    drone.slam_odometry(t - 0.4, t - 0.3, &(a.inverse() * b), None);
                 }
                 drone.tick(t, config);
                 vehicle.set_sticks(drone.sticks.expect("sticks"));
