@@ -421,15 +421,15 @@ pub struct FrameReport {
     pub loop_closures: usize,
     /// Coordinate frames merged because of it: (kept, absorbed).
     pub merged: Option<(usize, usize)>,
-    /// While lost: how the body moved since the robot's previous frame, registered on that
-    /// frame alone ([`Odometry`]).
+    /// While lost, or placed weakly ([`Tracking::Weak`]): how the body moved since the
+    /// robot's previous frame, registered on that frame alone ([`Odometry`]).
     pub odometry: Option<Odometry>,
 }
 
-/// Visual odometry of a lost robot: its body's motion between two consecutive frames, measured
-/// by registering one on the other. The map cannot place the robot, but a vehicle's filter can
-/// still fly on how far it moved (instead of on its model alone, which drifts metres in
-/// seconds); kept out of the map and the graph, which it would bend.
+/// Visual odometry of a robot the map cannot place (lost, or placed only weakly): its body's
+/// motion between two consecutive frames, measured by registering one on the other. A
+/// vehicle's filter can still fly on how far it moved (instead of on its model alone, which
+/// drifts metres in seconds); kept out of the map and the graph, which it would bend.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Odometry {
     /// The earlier frame's time, seconds.
@@ -661,8 +661,9 @@ struct Robot {
     has_imu: bool,
     /// Every tracked frame: time, reference keyframe, camera relative to it.
     track: Vec<(f64, usize, Isometry3<f64>)>,
-    /// While lost, the last frame (for visual odometry): its time and what it saw.
-    lost_last: Option<(f64, Arc<Observation>)>,
+    /// The last frame (for visual odometry): its time, what it saw, and whether the map
+    /// placed it (neither lost nor weak).
+    last_frame: Option<(f64, Arc<Observation>, bool)>,
 }
 
 /// A frame of a vehicle placed by the SLAM, kept to check later registrations by the vehicle's
@@ -875,7 +876,7 @@ impl Slam {
                     odometry_frames: 0,
                     projection_frames: 0,
                     weak_frames: 0,
-                    lost_last: None,
+                    last_frame: None,
                     has_imu: false,
                     track: vec![],
                 }
@@ -1057,11 +1058,21 @@ impl Slam {
         } else {
             self.track(&frame, observation.clone())
         };
+        // Visual odometry where the map does not place the frame: a weak frame's since the
+        // frame before, a lost frame's since one the map did not place either (the steps
+        // measured against the truth at stop 91; the first lost frame's would span the motion
+        // that lost it).
+        let placed = !matches!(report.tracking, Tracking::Lost(_) | Tracking::Weak { .. });
+        let since_placed = self.robots[k].last_frame.as_ref().is_some_and(|l| l.2);
+        if matches!(report.tracking, Tracking::Weak { .. })
+            || (matches!(report.tracking, Tracking::Lost(_)) && !since_placed)
+        {
+            report.odometry = self.frame_odometry(k, frame.stamp, &observation);
+        }
+        self.robots[k].last_frame = Some((frame.stamp, observation, placed));
         if let Tracking::Lost(_) = report.tracking {
-            report.odometry = self.lost_odometry(k, frame.stamp, &observation);
             let r = &mut self.robots[k];
             r.odometry_frames += usize::from(report.odometry.is_some());
-            r.lost_last = Some((frame.stamp, observation));
             r.lost_frames += 1;
             r.state = if r.reference.is_some() {
                 RobotState::Lost
@@ -1074,7 +1085,6 @@ impl Slam {
             r.checked = None;
         } else if let Some(n) = self.robots[k].reference {
             let r = &mut self.robots[k];
-            r.lost_last = None;
             // Placed on a registration of at least `needed` inliers (or none needed).
             let placed_on = |needed: usize| match report.tracking {
                 Tracking::Tracked { inliers } => inliers >= needed,
@@ -1099,13 +1109,13 @@ impl Slam {
         Ok(report)
     }
 
-    /// A lost robot's frame registered on its previous frame (also lost): how its body moved
-    /// in between, if the two share enough and the motion is one a frame allows.
-    fn lost_odometry(&self, k: usize, stamp: f64, observation: &Observation) -> Option<Odometry> {
+    /// A robot's frame registered on its previous frame: how its body moved in between, if
+    /// the two share enough and the motion is one a frame allows.
+    fn frame_odometry(&self, k: usize, stamp: f64, observation: &Observation) -> Option<Odometry> {
         let r = &self.robots[k];
         // Lost from a map it has; one that never started has nothing to fly back to.
         r.reference?;
-        let (since, previous) = r.lost_last.as_ref()?;
+        let (since, previous, _) = r.last_frame.as_ref()?;
         let gap = stamp - since;
         if !(gap > 0.0 && gap <= self.config.odometry_max_gap) {
             return None;
@@ -2946,7 +2956,7 @@ mod tests {
     }
 
     #[test]
-    fn a_lost_robot_measures_its_motion_between_consecutive_frames() {
+    fn a_robot_measures_its_motion_between_consecutive_frames() {
         // A vehicle's camera looking along its body's x at a textured wall 2–3 m ahead; it is
         // lost (the map cannot place it). Between two frames 0.1 s apart its body moved 4 cm
         // forward and 3 cm left and turned 3° anticlockwise.
@@ -2967,11 +2977,11 @@ mod tests {
             }],
         );
         // No odometry before the robot has a map to be lost from, nor without a frame before.
-        slam.robots[0].lost_last = Some((0.0, then.clone()));
-        assert!(slam.lost_odometry(0, 0.1, &now).is_none());
+        slam.robots[0].last_frame = Some((0.0, then.clone(), false));
+        assert!(slam.frame_odometry(0, 0.1, &now).is_none());
         slam.robots[0].reference = Some(0);
         let odometry = slam
-            .lost_odometry(0, 0.1, &now)
+            .frame_odometry(0, 0.1, &now)
             .expect("consecutive frames register");
         assert_eq!(odometry.since, 0.0);
         assert!(odometry.inliers >= 40, "{} inliers", odometry.inliers);
@@ -2979,12 +2989,12 @@ mod tests {
         assert!(err.translation.vector.norm() < 0.005, "{err}");
         assert!(err.rotation.angle() < 0.2f64.to_radians(), "{err}");
         // Frames too far apart, or sharing nothing, measure nothing.
-        assert!(slam.lost_odometry(0, 0.7, &now).is_none());
+        assert!(slam.frame_odometry(0, 0.7, &now).is_none());
         let elsewhere: Vec<(Point3<f64>, Descriptor)> = wall
             .iter()
             .map(|(p, _)| (*p, [bits(), bits(), bits(), bits()]))
             .collect();
         let other = seen(&elsewhere, &(map_from_body_now * body_from_camera));
-        assert!(slam.lost_odometry(0, 0.1, &other).is_none());
+        assert!(slam.frame_odometry(0, 0.1, &other).is_none());
     }
 }

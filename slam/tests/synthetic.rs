@@ -31,6 +31,10 @@ struct Flight {
     /// Frames reported [`Tracking::Weak`] (a pose not to fly on) and [`Tracking::Tracked`].
     weak: Vec<usize>,
     tracked: Vec<usize>,
+    /// Of the weak frames, those that came with visual odometry, and the largest error of its
+    /// displacement against the true motion of the body, metres.
+    weak_odometry: Vec<usize>,
+    weak_odometry_error_m: f64,
     /// Give every frame the true body pose as the vehicle's prediction, this far (metres) off
     /// in height; `None`: no prediction (a hand-held camera).
     predicted_height_error: Option<f64>,
@@ -101,6 +105,8 @@ impl Flight {
             frames: vec![0; drones],
             weak: vec![0; drones],
             tracked: vec![0; drones],
+            weak_odometry: vec![0; drones],
+            weak_odometry_error_m: 0.0,
             predicted_height_error: None,
             predicted_x_error: 0.0,
             predicted_x_drift_mps: 0.0,
@@ -216,7 +222,24 @@ impl Flight {
                     self.lost[k] += 1;
                     self.lost_why.push(why.clone());
                 }
-                Tracking::Weak { .. } => self.weak[k] += 1,
+                Tracking::Weak { .. } => {
+                    self.weak[k] += 1;
+                    if let (Some(o), Some(before)) = (&report.odometry, self.truth[k].last()) {
+                        self.weak_odometry[k] += 1;
+                        assert!(
+                            (o.since - before.t).abs() < 1e-9,
+                            "measured since {}",
+                            o.since
+                        );
+                        let body = body_from_camera();
+                        let moved =
+                            body * before.pose.inverse() * f.map_from_camera * body.inverse();
+                        let off = (o.previous_from_body.translation.vector
+                            - moved.translation.vector)
+                            .norm();
+                        self.weak_odometry_error_m = self.weak_odometry_error_m.max(off);
+                    }
+                }
                 Tracking::Tracked { .. } => self.tracked[k] += 1,
                 _ => {}
             }
@@ -790,6 +813,19 @@ fn on_a_vehicle_whose_filter_predicts_nothing_a_registration_on_few_inliers_is_n
         "{} of {} weak",
         vehicle.weak[0],
         vehicle.frames[0]
+    );
+    // Not flown on, a weak frame still measures how the body moved since the frame before
+    // (visual odometry for the vehicle's filter): each within 2 cm, 0.2 m/s over a frame.
+    assert!(
+        vehicle.weak_odometry[0] * 10 >= vehicle.weak[0] * 9,
+        "{} of {} weak frames measured their motion",
+        vehicle.weak_odometry[0],
+        vehicle.weak[0]
+    );
+    assert!(
+        vehicle.weak_odometry_error_m < 0.02,
+        "visual odometry {} m off",
+        vehicle.weak_odometry_error_m
     );
     let hand_held = run(false);
     assert_eq!(hand_held.weak[0], 0);

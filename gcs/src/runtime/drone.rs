@@ -298,6 +298,12 @@ pub struct DroneConfig {
     /// drone into a wall at 0.5 m/s (main command, seed 368, stop 82). One lost while flying
     /// faster brakes as hard as it must (seeds 374, 376: lost at 0.7 m/s, braked with 0.36).
     pub lost_stick_max: f64,
+    /// A weakly placed drone ([`SlamFix::weak`]) flies on the visual odometry of its frames
+    /// registered on at least this many inliers. Against the simulator's truth, its steps on
+    /// 15–29 were more than 0.2 m/s off one time in four (on 30–39, one in ten), and a run of
+    /// them on 25–28 threw a turning drone's filter 0.4 m off and into a wall (main command,
+    /// seed 918, stop 92); a lost drone, holding its spot with little stick, takes every step.
+    pub weak_odometry_min_inliers: usize,
     /// With no pose, the drone leans away from walls its depth camera ranged near lately, or
     /// the map had round it when it went blind ([`nav::proximity`]).
     pub proximity: ProximityConfig,
@@ -408,6 +414,7 @@ impl Default for DroneConfig {
             blind_hold_max_mps: 0.1,
             lost_still_mps: 0.25,
             lost_stick_max: 0.15,
+            weak_odometry_min_inliers: 30,
             proximity: ProximityConfig::default(),
             battery: battery::Limits {
                 // The simulated vehicle's battery failsafe lands it at 10 %.
@@ -1268,7 +1275,7 @@ impl Drone {
     /// What the SLAM made of one of this drone's camera frames, reaching the mission at `now`:
     /// a pose to fly on, a loss (with visual odometry, if the camera still measured the
     /// motion), or a weak registration ([`SlamFix::weak`]), which is neither: the filter
-    /// carries the pose on as between frames.
+    /// carries the pose on as between frames, on the visual odometry if measured.
     pub fn take_fix(&mut self, now: f64, fix: &SlamFix, config: &DroneConfig) {
         self.camera_frame(now, fix.half_fov_rad);
         self.mapped_until = self.mapped_until.max(fix.stamp);
@@ -1278,6 +1285,14 @@ impl Drone {
         }
         self.inliers = fix.inliers;
         if fix.weak {
+            // Not a pose to fly on, but how far the body moved since the frame before is still
+            // measured: without it a stretch of weak frames leaves the filter on its model alone.
+            if let Some(o) = &fix.odometry
+                && o.inliers >= config.weak_odometry_min_inliers
+            {
+                let inliers = Some(o.inliers);
+                self.odometry_step(o.since, fix.stamp, &o.previous_from_body, inliers, true);
+            }
             return;
         }
         match fix.map_from_body {
@@ -1389,7 +1404,7 @@ impl Drone {
         });
     }
 
-    /// Visual odometry while lost: the body moved `previous_from_body` between its frames at
+    /// Visual odometry while lost or weakly placed: the body moved `previous_from_body` between its frames at
     /// `since` and `stamp`, registered on `inliers` matches if known (fewer count for less:
     /// [`EkfConfig::odometry_full_inliers`]). The filter flies on it (holding where
     /// the SLAM lost the drone, going back to the last keyframe) instead of on its model alone.
@@ -1399,6 +1414,18 @@ impl Drone {
         stamp: f64,
         previous_from_body: &Isometry3<f64>,
         inliers: Option<usize>,
+    ) {
+        self.odometry_step(since, stamp, previous_from_body, inliers, false);
+    }
+
+    /// [`Drone::slam_odometry`], of a frame the SLAM placed weakly if `weak`.
+    fn odometry_step(
+        &mut self,
+        since: f64,
+        stamp: f64,
+        previous_from_body: &Isometry3<f64>,
+        inliers: Option<usize>,
+        weak: bool,
     ) {
         let d = previous_from_body.translation.vector;
         let update = self
@@ -1420,7 +1447,9 @@ impl Drone {
             ?update,
             velocity = ?self.ekf.valid_velocity(),
             pose = self.pose().is_some(),
-            "visual odometry while lost"
+            lost = self.lost_since.is_some(),
+            weak,
+            "visual odometry"
         );
     }
 
@@ -3052,6 +3081,28 @@ mod tests {
         assert_eq!(drone.lost_since, Some(t));
     }
 
+    /// A camera frame of drone 0 at `stamp` the SLAM could not place, whose body moved `step`
+    /// metres forward since the frame 0.1 s before by visual odometry on `inliers` (`None`:
+    /// not measured).
+    fn frame_with_odometry(stamp: f64, step: Option<f64>, inliers: usize) -> SlamFix {
+        SlamFix {
+            drone: 0,
+            stamp,
+            map_from_body: None,
+            keyframe: false,
+            inliers: None,
+            weak: false,
+            odometry: step.map(|step| Odometry {
+                since: stamp - 0.1,
+                previous_from_body: Isometry3::translation(step, 0.0, 0.0),
+                inliers,
+            }),
+            half_fov_rad: 0.5,
+            ranges: vec![],
+            heading: None,
+        }
+    }
+
     #[test]
     fn a_lost_drone_weighs_its_visual_odometry_by_the_inliers() {
         // Tracked hovering, then lost and still by visual odometry on many inliers; then one
@@ -3060,21 +3111,8 @@ mod tests {
         let config = DroneConfig::default();
         let velocity_after = |inliers: usize| {
             let mut drone = exploring_drone(Arc::default(), &config);
-            let frame = |stamp: f64, step: f64, inliers: usize| SlamFix {
-                drone: 0,
-                stamp,
-                map_from_body: None,
-                keyframe: false,
-                inliers: None,
-                weak: false,
-                odometry: Some(Odometry {
-                    since: stamp - 0.1,
-                    previous_from_body: Isometry3::translation(step, 0.0, 0.0),
-                    inliers,
-                }),
-                half_fov_rad: 0.5,
-                ranges: vec![],
-                heading: None,
+            let frame = |stamp: f64, step: f64, inliers: usize| {
+                frame_with_odometry(stamp, Some(step), inliers)
             };
             let mut t = 0.0;
             while t < 2.0 {
@@ -3100,6 +3138,69 @@ mod tests {
         let (sound, weak) = (velocity_after(120), velocity_after(15));
         assert!(sound > 0.3, "{sound}");
         assert!(weak < 0.5 * sound, "{weak} against {sound}");
+    }
+
+    #[test]
+    fn a_weakly_placed_drone_flies_on_its_visual_odometry() {
+        // Tracked hovering for 2 s, then only weak registrations (0.5 m away): with its frames'
+        // visual odometry on enough inliers the filter measures the drone's motion and keeps a
+        // pose to fly on for longer than on its model alone, and a moving step moves its
+        // velocity; on too few inliers the odometry is not flown on.
+        let config = DroneConfig::default();
+        let enough = config.weak_odometry_min_inliers;
+        let weak_for = |step: Option<f64>, inliers: usize| {
+            let mut drone = exploring_drone(Arc::default(), &config);
+            let frame = |stamp: f64, weak: bool| SlamFix {
+                map_from_body: Some(Isometry3::translation(
+                    if weak { 0.5 } else { 0.0 },
+                    0.0,
+                    0.9,
+                )),
+                inliers: Some(if weak { 20 } else { 120 }),
+                weak,
+                ..frame_with_odometry(stamp, step.filter(|_| weak), inliers)
+            };
+            let mut t = 0.0;
+            while t < 2.0 {
+                t += 0.1;
+                drone.take_fix(t, &frame(t, false), &config);
+                drone.tick(t, &config);
+            }
+            let weak_since = t;
+            let mut velocity = 0.0;
+            while drone.pose().is_some() && t < weak_since + 20.0 {
+                t += 0.1;
+                drone.take_fix(t, &frame(t, true), &config);
+                drone.tick(t, &config);
+                if t < weak_since + 1.05 {
+                    velocity = drone.ekf.estimate().velocity[0];
+                }
+                assert_eq!(drone.lost_since, None, "a weak frame is no loss");
+            }
+            (t - weak_since, velocity)
+        };
+        let (blind_s, _) = weak_for(None, enough);
+        let (still_s, still_mps) = weak_for(Some(0.0), enough);
+        let (_, moving_mps) = weak_for(Some(0.03), enough);
+        let (few_s, few_mps) = weak_for(Some(0.03), enough - 1);
+        eprintln!(
+            "pose kept {blind_s:.1} s blind, {still_s:.1} s on odometry, {few_s:.1} s on too \
+             few inliers; {still_mps:.3}, {moving_mps:.3} and {few_mps:.3} m/s"
+        );
+        assert!(
+            still_s > 2.0 * blind_s,
+            "a pose for {still_s} s on odometry, {blind_s} s without"
+        );
+        assert!(still_mps.abs() < 0.05, "{still_mps}");
+        assert!(
+            moving_mps > 0.15,
+            "measured 0.3 m/s, the filter has {moving_mps}"
+        );
+        assert!(
+            (few_s - blind_s).abs() < 0.15,
+            "{few_s} s on too few inliers"
+        );
+        assert!(few_mps.abs() < 0.05, "{few_mps}");
     }
 
     /// Ticks a drone the SLAM has lost at `t`, with nothing to measure its motion, until its

@@ -215,7 +215,8 @@ pub struct SlamFix {
     /// The pose is a weak registration away from the motion so far ([`Tracking::Weak`]): the
     /// drone is not flown on it (nor taken for lost).
     pub weak: bool,
-    /// While lost: how the body moved since the drone's previous frame (visual odometry).
+    /// While lost or weak: how the body moved since the drone's previous frame (visual
+    /// odometry).
     pub odometry: Option<Odometry>,
     /// Half the camera's horizontal field of view, radians (from the frame's intrinsics).
     pub half_fov_rad: f64,
