@@ -1059,9 +1059,8 @@ impl Slam {
             self.track(&frame, observation.clone())
         };
         // Visual odometry where the map does not place the frame: a weak frame's since the
-        // frame before, a lost frame's since one the map did not place either (the steps
-        // measured against the truth at stop 91; the first lost frame's would span the motion
-        // that lost it).
+        // frame before, a lost frame's only since one the map did not place either (the steps
+        // stop 91 measured against the truth; the step into a loss was never measured).
         let placed = !matches!(report.tracking, Tracking::Lost(_) | Tracking::Weak { .. });
         let since_placed = self.robots[k].last_frame.as_ref().is_some_and(|l| l.2);
         if matches!(report.tracking, Tracking::Weak { .. })

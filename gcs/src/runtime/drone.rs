@@ -1404,10 +1404,11 @@ impl Drone {
         });
     }
 
-    /// Visual odometry while lost or weakly placed: the body moved `previous_from_body` between its frames at
-    /// `since` and `stamp`, registered on `inliers` matches if known (fewer count for less:
-    /// [`EkfConfig::odometry_full_inliers`]). The filter flies on it (holding where
-    /// the SLAM lost the drone, going back to the last keyframe) instead of on its model alone.
+    /// Visual odometry while lost or weakly placed: the body moved `previous_from_body`
+    /// between its frames at `since` and `stamp`, registered on `inliers` matches if known
+    /// (fewer count for less: [`EkfConfig::odometry_full_inliers`]). The filter flies on it
+    /// (holding where the SLAM lost the drone, going back to the last keyframe) instead of on
+    /// its model alone.
     pub fn slam_odometry(
         &mut self,
         since: f64,
