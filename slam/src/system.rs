@@ -1061,11 +1061,13 @@ impl Slam {
         // Visual odometry where the map does not place the frame: a weak frame's since the
         // frame before, a lost frame's only since one the map did not place either (the steps
         // stop 91 measured against the truth; the step into a loss was never measured).
-        let placed = !matches!(report.tracking, Tracking::Lost(_) | Tracking::Weak { .. });
         let since_placed = self.robots[k].last_frame.as_ref().is_some_and(|l| l.2);
-        if matches!(report.tracking, Tracking::Weak { .. })
-            || (matches!(report.tracking, Tracking::Lost(_)) && !since_placed)
-        {
+        let (measure, placed) = match report.tracking {
+            Tracking::Weak { .. } => (true, false),
+            Tracking::Lost(_) => (!since_placed, false),
+            _ => (false, true),
+        };
+        if measure {
             report.odometry = self.frame_odometry(k, frame.stamp, &observation);
         }
         self.robots[k].last_frame = Some((frame.stamp, observation, placed));
