@@ -110,13 +110,21 @@ impl Sight {
 }
 
 /// The nearest wall in each direction of one camera frame, from its points in the body frame
-/// (x forward, y left, z up, metres; every pixel with a depth, floor and ceiling included) and
-/// the camera's horizontal field of view `[right, left]` edge bearings (radians): every
-/// direction in view gets a reading. The third-nearest point of the band counts as the wall,
-/// so a stray pixel does not; a direction with no wall is [`Sight::Open`] if it has three
-/// points at any height, else [`Sight::Blocked`].
+/// (x forward, y left, z up, metres; every pixel with a depth, floor and ceiling included), the
+/// camera's place on the body `camera_in_body` (x, y) and its horizontal field of view
+/// `[right, left]` edge bearings (radians): every direction in view gets a reading. The
+/// third-nearest point of the band counts as the wall, so a stray pixel does not; a direction
+/// with no wall is [`Sight::Open`] if it has three points at any height, else
+/// [`Sight::Blocked`].
+///
+/// Directions are the camera's (its image's columns), ranges the body centre's. Binned by
+/// their bearing from the centre instead, a near wall's points at the edge of the view fall
+/// inside it (what a camera 0.1 m ahead of the centre sees at ±31° on a wall 0.6 m off lies
+/// ±27° from the centre), so the outermost direction measured nothing, read as a wall too near
+/// to range, and pushed every blind drone near a wall off one that was not there.
 pub fn readings(
     points_in_body: impl IntoIterator<Item = [f64; 3]>,
+    camera_in_body: [f64; 2],
     fov_rad: [f64; 2],
     config: &ProximityConfig,
 ) -> Vec<Reading> {
@@ -133,7 +141,7 @@ pub fn readings(
         if !(x.is_finite() && y.is_finite() && z.is_finite()) {
             continue;
         }
-        let bearing = y.atan2(x);
+        let bearing = (y - camera_in_body[1]).atan2(x - camera_in_body[0]);
         let i = ((bearing - right) / step).floor();
         if !(0.0..bins as f64).contains(&i) {
             continue;
@@ -318,6 +326,8 @@ mod tests {
     use std::f64::consts::FRAC_PI_2;
 
     const FOV: [f64; 2] = [-0.54, 0.54];
+    /// A camera at the body's centre.
+    const CENTRE: [f64; 2] = [0.0, 0.0];
 
     /// The points of a flat wall `d` metres ahead of the body, across the camera's view, at
     /// heights from −1 to +1 m (floor and ceiling lines included).
@@ -331,10 +341,15 @@ mod tests {
         points
     }
 
+    /// The readings of a camera at the body's centre facing a flat wall `d` metres ahead.
+    fn seen_ahead(d: f64, config: &ProximityConfig) -> Vec<Reading> {
+        readings(wall_ahead(d), CENTRE, FOV, config)
+    }
+
     #[test]
     fn a_wall_ahead_is_read_in_every_direction_in_view_at_its_slant_range() {
         let config = ProximityConfig::default();
-        let r = readings(wall_ahead(1.0), FOV, &config);
+        let r = readings(wall_ahead(1.0), CENTRE, FOV, &config);
         assert_eq!(r.len(), 13);
         for reading in &r {
             let range = reading
@@ -348,11 +363,41 @@ mod tests {
     }
 
     #[test]
+    fn a_camera_ahead_of_the_centre_reads_a_near_wall_across_its_whole_view() {
+        let config = ProximityConfig::default();
+        // A camera 0.1 m ahead of the body's centre, 0.5 m from a flat wall: its pixels'
+        // rays, evenly across its view, with the wall's points on the body.
+        let camera = [0.1, 0.0];
+        let wall: Vec<[f64; 3]> = (0..=160)
+            .flat_map(|u| {
+                let bearing = FOV[0] + (FOV[1] - FOV[0]) * f64::from(u) / 160.0;
+                (-10..=10).map(move |j| [0.6, 0.5 * bearing.tan(), f64::from(j) / 20.0])
+            })
+            .collect();
+        let r = readings(wall.iter().copied(), camera, FOV, &config);
+        assert_eq!(r.len(), 13);
+        for reading in &r {
+            // Every direction sees the wall, at its range from the centre.
+            let centre_bearing = (0.5 * reading.bearing_rad.tan()).atan2(0.6);
+            let expected = 0.6 / centre_bearing.cos();
+            let range = reading.sight.range_m();
+            assert!(
+                range.is_some_and(|m| (m - expected).abs() < 0.03),
+                "{reading:?} of {r:?}"
+            );
+        }
+        // Binned from the centre, the outermost direction on the left saw nothing: a wall too
+        // near to range where there is none.
+        let from_centre = readings(wall, CENTRE, FOV, &config);
+        assert_eq!(from_centre.last().map(|r| r.sight), Some(Sight::Blocked));
+    }
+
+    #[test]
     fn floor_ceiling_and_stray_points_are_not_walls() {
         let config = ProximityConfig::default();
         // Only floor and ceiling points, near: no wall read; open where they lie, ahead.
         let floor = (0..100).map(|i| [0.3 + f64::from(i) * 0.01, 0.0, -0.9]);
-        let r = readings(floor, FOV, &config);
+        let r = readings(floor, CENTRE, FOV, &config);
         assert!(r.iter().all(|r| r.sight.range_m().is_none()));
         assert!(
             r.iter()
@@ -362,7 +407,7 @@ mod tests {
         let mut points = wall_ahead(2.0);
         points.push([0.2, 0.0, 0.0]);
         points.push([0.21, 0.0, 0.0]);
-        let ahead = readings(points, FOV, &config)
+        let ahead = readings(points, CENTRE, FOV, &config)
             .into_iter()
             .find(|r| r.bearing_rad.abs() < 0.05)
             .expect("a direction ahead");
@@ -371,9 +416,9 @@ mod tests {
             "{ahead:?}"
         );
         // Garbage field of view or points: nothing, no panic.
-        assert!(readings(wall_ahead(1.0), [0.5, -0.5], &config).is_empty());
-        assert!(readings(wall_ahead(1.0), [f64::NAN, 0.5], &config).is_empty());
-        let nan = readings([[f64::NAN, 0.0, 0.0]], FOV, &config);
+        assert!(readings(wall_ahead(1.0), CENTRE, [0.5, -0.5], &config).is_empty());
+        assert!(readings(wall_ahead(1.0), CENTRE, [f64::NAN, 0.5], &config).is_empty());
+        let nan = readings([[f64::NAN, 0.0, 0.0]], CENTRE, FOV, &config);
         assert!(nan.iter().all(|r| r.sight == Sight::Blocked));
     }
 
@@ -381,9 +426,9 @@ mod tests {
     fn a_near_wall_ahead_leans_the_drone_back_and_a_far_one_does_not() {
         let config = ProximityConfig::default();
         let mut p = Proximity::new(&config);
-        p.observe(0.0, 0.0, &readings(wall_ahead(2.0), FOV, &config), &config);
+        p.observe(0.0, 0.0, &seen_ahead(2.0, &config), &config);
         assert_eq!(p.push(0.1, 0.0, &config), [0.0, 0.0]);
-        p.observe(1.0, 0.0, &readings(wall_ahead(0.45), FOV, &config), &config);
+        p.observe(1.0, 0.0, &seen_ahead(0.45, &config), &config);
         let [forward, left] = p.push(1.1, 0.0, &config);
         assert!(forward < -0.02, "leans back: {forward}");
         assert!(
@@ -391,7 +436,7 @@ mod tests {
             "about straight back: {left}"
         );
         // Nearer, harder, up to the limit.
-        p.observe(1.2, 0.0, &readings(wall_ahead(0.3), FOV, &config), &config);
+        p.observe(1.2, 0.0, &seen_ahead(0.3, &config), &config);
         let nearer = p.push(1.3, 0.0, &config);
         assert!(nearer[0] < forward, "{nearer:?}");
         assert!(nearer[0].hypot(nearer[1]) <= config.max + 1e-12);
@@ -403,7 +448,7 @@ mod tests {
         let mut p = Proximity::new(&config);
         // Seen ahead at heading 0; the drone has since turned a quarter left: the wall is on
         // its right, so it leans left.
-        p.observe(0.0, 0.0, &readings(wall_ahead(0.4), FOV, &config), &config);
+        p.observe(0.0, 0.0, &seen_ahead(0.4, &config), &config);
         let [forward, left] = p.push(0.5, FRAC_PI_2, &config);
         assert!(left > 0.02, "leans left: {left}");
         assert!(forward.abs() < 0.2 * left, "{forward}");
@@ -416,18 +461,8 @@ mod tests {
     fn walls_either_side_cancel_and_old_ranges_are_forgotten() {
         let config = ProximityConfig::default();
         let mut p = Proximity::new(&config);
-        p.observe(
-            0.0,
-            FRAC_PI_2,
-            &readings(wall_ahead(0.4), FOV, &config),
-            &config,
-        );
-        p.observe(
-            0.0,
-            -FRAC_PI_2,
-            &readings(wall_ahead(0.4), FOV, &config),
-            &config,
-        );
+        p.observe(0.0, FRAC_PI_2, &seen_ahead(0.4, &config), &config);
+        p.observe(0.0, -FRAC_PI_2, &seen_ahead(0.4, &config), &config);
         let [forward, left] = p.push(0.1, 0.0, &config);
         assert!(
             forward.abs() < 1e-9 && left.abs() < 1e-9,
@@ -435,12 +470,7 @@ mod tests {
         );
         // One side only, old: forgotten.
         let mut q = Proximity::new(&config);
-        q.observe(
-            0.0,
-            FRAC_PI_2,
-            &readings(wall_ahead(0.4), FOV, &config),
-            &config,
-        );
+        q.observe(0.0, FRAC_PI_2, &seen_ahead(0.4, &config), &config);
         assert!(q.push(1.0, 0.0, &config)[1] < 0.0);
         assert_eq!(q.push(config.max_age_s + 0.1, 0.0, &config), [0.0, 0.0]);
         assert_eq!(q.nearest(config.max_age_s + 0.1, &config), None);
@@ -510,7 +540,7 @@ mod tests {
     #[test]
     fn a_direction_that_shows_nothing_at_all_is_blocked_by_a_wall_too_near_to_range() {
         let config = ProximityConfig::default();
-        let nothing = readings(Vec::<[f64; 3]>::new(), FOV, &config);
+        let nothing = readings(Vec::<[f64; 3]>::new(), CENTRE, FOV, &config);
         assert_eq!(nothing.len(), 13);
         assert!(nothing.iter().all(|r| r.sight == Sight::Blocked));
         // Never ranged near (it drifted to the wall backward, then turned to face it): a wall
@@ -530,7 +560,7 @@ mod tests {
         // Near, then nothing for longer than a range is kept: still pushed away, from the
         // nearer range.
         let mut q = Proximity::new(&config);
-        q.observe(0.0, 0.0, &readings(wall_ahead(0.3), FOV, &config), &config);
+        q.observe(0.0, 0.0, &seen_ahead(0.3, &config), &config);
         for t in 1..=8 {
             q.observe(f64::from(t), 0.0, &nothing, &config);
         }
@@ -538,7 +568,7 @@ mod tests {
         // Ranged near long ago, forgotten, then nothing: the wall is at `blocked_m`, not at
         // the forgotten range.
         let mut old = Proximity::new(&config);
-        old.observe(0.0, 0.0, &readings(wall_ahead(0.25), FOV, &config), &config);
+        old.observe(0.0, 0.0, &seen_ahead(0.25, &config), &config);
         old.observe(10.0, 0.0, &nothing, &config);
         assert_eq!(old.nearest(10.1, &config), Some(config.blocked_m));
     }
@@ -546,13 +576,13 @@ mod tests {
     #[test]
     fn a_direction_that_shows_the_floor_and_no_wall_is_open() {
         let config = ProximityConfig::default();
-        let open = readings(floor_ahead(), FOV, &config);
+        let open = readings(floor_ahead(), CENTRE, FOV, &config);
         assert_eq!(open.len(), 13);
         assert!(open.iter().all(|r| r.sight == Sight::Open), "{open:?}");
         // Near, then the floor beyond (the camera swept from a wall to a door, or the drone
         // left the wall): clear, no lean.
         let mut p = Proximity::new(&config);
-        p.observe(0.0, 0.0, &readings(wall_ahead(0.5), FOV, &config), &config);
+        p.observe(0.0, 0.0, &seen_ahead(0.5, &config), &config);
         assert!(p.push(0.1, 0.0, &config)[0] < -0.01);
         p.observe(1.0, 0.0, &open, &config);
         assert_eq!(p.nearest(1.1, &config), None);

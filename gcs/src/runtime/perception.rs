@@ -495,7 +495,8 @@ pub fn proximity_readings(
             })
         })
     });
-    nav::proximity::readings(points, [a.min(b), a.max(b)], config)
+    let camera = body_from_camera.translation.vector;
+    nav::proximity::readings(points, [camera.x, camera.y], [a.min(b), a.max(b)], config)
 }
 
 /// A stream's camera intrinsics as the SLAM's pinhole model.
@@ -671,6 +672,19 @@ mod tests {
                 !wall.is_empty() && wall.iter().all(|s| *s == Sight::Blocked),
                 "{z} m: {wall:?}"
             );
+            // South at its wall from 0.7 m (0.6 m from the camera): ranged in every direction
+            // in view, the outermost too (stop 93: its left one read blocked, so a drone
+            // without a pose near a wall leaned off one that was not there).
+            let seen = look(4.0, 4.7, z, -std::f64::consts::FRAC_PI_2);
+            assert!(
+                seen.iter()
+                    .all(|r| r.sight.range_m().is_some_and(|m| m > 0.65 && m < 1.0)),
+                "{z} m: {seen:?}"
+            );
+            // So a drone without a pose there leans nowhere: the wall is beyond the margin.
+            let mut memory = nav::proximity::Proximity::new(&config);
+            memory.observe(0.0, 0.0, &seen, &config);
+            assert_eq!(memory.push(0.0, 0.0, &config), [0.0; 2], "{z} m: {seen:?}");
         }
     }
 
