@@ -8,9 +8,12 @@
 //! * [`occupancy`], [`livemap`]: the 3D voxel map, its 2D projection, and its rebuild when the
 //!   graph moves;
 //! * [`ekf`]: the pose filter that feeds controllers between camera frames;
+//! * [`depth_odometry`]: the motion a depth image's walls measure when the camera sees no
+//!   texture;
 //! * [`dataset`], [`trajectory`], [`eval`]: recorded sequences, TUM trajectories, ATE and RPE.
 
 pub mod dataset;
+pub mod depth_odometry;
 pub mod ekf;
 pub mod eval;
 pub mod features;

@@ -17,6 +17,7 @@ use nav::mission::SAME_FRONTIER_M;
 use nav::proximity::{Proximity, ProximityConfig};
 use nav::sweep::{self, View};
 use slam::ekf::{Ekf, EkfConfig, Input, Update};
+use slam::depth_odometry::DepthOdometry;
 
 use super::battery;
 use super::perception::SlamFix;
@@ -1292,6 +1293,8 @@ impl Drone {
             {
                 let inliers = Some(o.inliers);
                 self.odometry_step(o.since, fix.stamp, &o.previous_from_body, inliers, true);
+            } else if let Some(o) = &fix.depth_odometry {
+                self.depth_odometry_step(fix.stamp, o, true);
             }
             return;
         }
@@ -1311,6 +1314,8 @@ impl Drone {
                 self.slam_lost(fix.stamp, config);
                 if let Some(o) = &fix.odometry {
                     self.slam_odometry(o.since, fix.stamp, &o.previous_from_body, Some(o.inliers));
+                } else if let Some(o) = &fix.depth_odometry {
+                    self.depth_odometry_step(fix.stamp, o, false);
                 }
             }
         }
@@ -1451,6 +1456,41 @@ impl Drone {
             lost = self.lost_since.is_some(),
             weak,
             "visual odometry"
+        );
+    }
+
+    /// Odometry from the walls' depth of a frame taken at `stamp` (the camera saw no texture
+    /// to register), of a frame the SLAM placed weakly if `weak`: the filter takes the motion
+    /// along the directions the walls measure ([`Ekf::update_odometry_along`]).
+    fn depth_odometry_step(&mut self, stamp: f64, odometry: &DepthOdometry, weak: bool) {
+        let update = self
+            .ekf
+            .update_odometry_along(odometry.since, stamp, &odometry.along);
+        let [forward, left] = odometry.along.iter().fold([0.0; 2], |[f, l], a| {
+            [
+                f + a.direction[0] * a.displacement,
+                l + a.direction[1] * a.displacement,
+            ]
+        });
+        // Blind, what it drifted: as far as the walls measure.
+        if self.pose().is_none() && update == Update::Applied {
+            self.blind_drift
+                .add(forward, left, self.ekf.estimate().attitude[2]);
+        }
+        tracing::debug!(
+            drone = self.id + 1,
+            since = odometry.since,
+            stamp,
+            forward,
+            left,
+            directions = odometry.along.len(),
+            matches = odometry.matches,
+            ?update,
+            velocity = ?self.ekf.valid_velocity(),
+            pose = self.pose().is_some(),
+            lost = self.lost_since.is_some(),
+            weak,
+            "depth odometry"
         );
     }
 
@@ -3047,6 +3087,7 @@ mod tests {
             inliers: Some(if weak { 15 } else { 120 }),
             weak,
             odometry: None,
+            depth_odometry: None,
             half_fov_rad: 0.5,
             ranges: vec![],
             heading: None,
@@ -3098,6 +3139,7 @@ mod tests {
                 previous_from_body: Isometry3::translation(step, 0.0, 0.0),
                 inliers,
             }),
+            depth_odometry: None,
             half_fov_rad: 0.5,
             ranges: vec![],
             heading: None,
@@ -3122,6 +3164,7 @@ mod tests {
                     map_from_body: Some(Isometry3::translation(0.0, 0.0, 0.9)),
                     inliers: Some(120),
                     odometry: None,
+                    depth_odometry: None,
                     ..frame(t, 0.0, 0)
                 };
                 drone.take_fix(t, &tracked, &config);
@@ -3139,6 +3182,57 @@ mod tests {
         let (sound, weak) = (velocity_after(120), velocity_after(15));
         assert!(sound > 0.3, "{sound}");
         assert!(weak < 0.5 * sound, "{weak} against {sound}");
+    }
+
+    #[test]
+    fn a_lost_drone_facing_a_blank_wall_brakes_the_drift_its_depth_measures() {
+        // Tracked hovering facing +x, then lost in front of a wall with no texture: no visual
+        // odometry, but the wall's depth says the body comes 1.5 cm nearer every frame
+        // (0.15 m/s, the air carrying it in). The filter learns the drift and the drone leans
+        // back against it; told nothing, it hovers level and drifts on.
+        let config = DroneConfig::default();
+        let after_lost = |depth: bool| {
+            let mut drone = exploring_drone(Arc::default(), &config);
+            let mut t = 0.0;
+            while t < 2.0 {
+                t += 0.1;
+                let tracked = SlamFix {
+                    map_from_body: Some(Isometry3::translation(0.0, 0.0, 0.9)),
+                    inliers: Some(120),
+                    ..frame_with_odometry(t, None, 0)
+                };
+                drone.take_fix(t, &tracked, &config);
+                drone.tick(t, &config);
+            }
+            for _ in 0..15 {
+                t += 0.1;
+                let lost = SlamFix {
+                    depth_odometry: depth.then(|| DepthOdometry {
+                        since: t - 0.1,
+                        along: vec![slam::ekf::Along {
+                            direction: [1.0, 0.0],
+                            displacement: 0.015,
+                            sigma: 0.003,
+                        }],
+                        turn_rad: 0.0,
+                        matches: 800,
+                    }),
+                    ..frame_with_odometry(t, None, 0)
+                };
+                drone.take_fix(t, &lost, &config);
+                drone.tick(t, &config);
+            }
+            assert!(drone.pose().is_none() || depth, "lost, and blind without the depth");
+            let velocity = drone.ekf.valid_velocity();
+            (f64::from(drone.sticks.expect("sticks").pitch), velocity)
+        };
+        let (pitch, velocity) = after_lost(true);
+        let velocity = velocity.expect("the drift toward the wall is measured");
+        assert!(velocity[0] > 0.08, "{velocity:?}");
+        assert!(velocity[1].abs() < 0.02, "{velocity:?}");
+        assert!(pitch < -0.03, "leans back from the wall: pitch {pitch}");
+        let (pitch, _) = after_lost(false);
+        assert!(pitch.abs() < 0.01, "nothing to brake on: pitch {pitch}");
     }
 
     #[test]
@@ -3375,6 +3469,7 @@ mod tests {
                     inliers: None,
                     weak: false,
                     odometry: None,
+                    depth_odometry: None,
                     half_fov_rad: 0.5,
                     ranges: wall.clone(),
                     heading: Some(seen_heading),
@@ -3613,6 +3708,7 @@ mod tests {
                 inliers: Some(120),
                 weak: false,
                 odometry: None,
+                depth_odometry: None,
                 half_fov_rad: 0.5,
                 ranges: vec![],
                 heading: None,
