@@ -16,8 +16,8 @@ use nav::local::{Follow, FollowerConfig, PathFollower, Pose2, wrap_angle};
 use nav::mission::SAME_FRONTIER_M;
 use nav::proximity::{Proximity, ProximityConfig};
 use nav::sweep::{self, View};
-use slam::ekf::{Ekf, EkfConfig, Input, Update};
 use slam::depth_odometry::DepthOdometry;
+use slam::ekf::{Ekf, EkfConfig, Input, Update};
 
 use super::battery;
 use super::perception::SlamFix;
@@ -1466,12 +1466,7 @@ impl Drone {
         let update = self
             .ekf
             .update_odometry_along(odometry.since, stamp, &odometry.along);
-        let [forward, left] = odometry.along.iter().fold([0.0; 2], |[f, l], a| {
-            [
-                f + a.direction[0] * a.displacement,
-                l + a.direction[1] * a.displacement,
-            ]
-        });
+        let [forward, left] = odometry.displacement();
         // Blind, what it drifted: as far as the walls measure.
         if self.pose().is_none() && update == Update::Applied {
             self.blind_drift
@@ -3222,7 +3217,10 @@ mod tests {
                 drone.take_fix(t, &lost, &config);
                 drone.tick(t, &config);
             }
-            assert!(drone.pose().is_none() || depth, "lost, and blind without the depth");
+            assert!(
+                drone.pose().is_none() || depth,
+                "lost, and blind without the depth"
+            );
             let velocity = drone.ekf.valid_velocity();
             (f64::from(drone.sticks.expect("sticks").pitch), velocity)
         };
