@@ -593,6 +593,39 @@ mod tests {
     use super::*;
     use nav::proximity::Sight;
 
+    /// The simulator's camera on its drone in the built-in apartment: renders what the drone's
+    /// body at (x, y, z) heading `yaw` sees (with the depth's noise of frame `noise` if given).
+    struct Apartment {
+        world: sitl::World,
+        camera: sitl::Camera,
+        body_from_camera: Isometry3<f64>,
+    }
+
+    impl Apartment {
+        fn new() -> Self {
+            Self {
+                world: sitl::World::load("apartment").expect("the built-in world"),
+                camera: sitl::Camera::kinect(320, 240),
+                body_from_camera: crate::fleet::sim_body_from_camera(),
+            }
+        }
+
+        fn frame(&self, [x, y, z]: [f64; 3], yaw: f64, noise: Option<u64>) -> RgbdFrame {
+            let map_from_body = Isometry3::new(
+                nalgebra::Vector3::new(x, y, z),
+                nalgebra::Vector3::z() * yaw,
+            );
+            sitl::render::render_frame(
+                &self.world,
+                &(map_from_body * self.body_from_camera),
+                &self.camera,
+                noise.map(|frame| (7, frame)),
+                1,
+                Duration::ZERO,
+            )
+        }
+    }
+
     fn sample(t: f64, heading: f64) -> SensorSample {
         SensorSample {
             t,
@@ -680,24 +713,11 @@ mod tests {
         // The simulator's camera on its drone, at every altitude band of an eight-drone fleet:
         // a direction without a wall in range still shows the floor or the ceiling, which is
         // what tells an opening from a wall inside the camera's minimum range.
-        let world = sitl::World::load("apartment").expect("the built-in world");
-        let camera = sitl::Camera::kinect(320, 240);
-        let body_from_camera = crate::fleet::sim_body_from_camera();
+        let apartment = Apartment::new();
         let config = ProximityConfig::default();
         let look = |x: f64, y: f64, z: f64, yaw: f64| {
-            let map_from_body = Isometry3::new(
-                nalgebra::Vector3::new(x, y, z),
-                nalgebra::Vector3::z() * yaw,
-            );
-            let frame = sitl::render::render_frame(
-                &world,
-                &(map_from_body * body_from_camera),
-                &camera,
-                None,
-                1,
-                Duration::ZERO,
-            );
-            proximity_readings(&frame, &body_from_camera, &config)
+            let frame = apartment.frame([x, y, z], yaw, None);
+            proximity_readings(&frame, &apartment.body_from_camera, &config)
         };
         let ahead = |r: &[Reading]| -> Vec<Sight> {
             r.iter()
@@ -744,25 +764,12 @@ mod tests {
         // drone comes 1.2 cm nearer, slides 1.5 cm east along the wall and turns half a
         // degree; at every altitude band the walls' depth measures the first and claims
         // nothing of the second.
-        let world = sitl::World::load("apartment").expect("the built-in world");
-        let camera = sitl::Camera::kinect(320, 240);
-        let body_from_camera = crate::fleet::sim_body_from_camera();
+        let apartment = Apartment::new();
         let config = DepthOdometryConfig::default();
         let south = -std::f64::consts::FRAC_PI_2;
         let look = |x: f64, y: f64, z: f64, yaw: f64, frame: u64| {
-            let map_from_body = Isometry3::new(
-                nalgebra::Vector3::new(x, y, z),
-                nalgebra::Vector3::z() * yaw,
-            );
-            let frame = sitl::render::render_frame(
-                &world,
-                &(map_from_body * body_from_camera),
-                &camera,
-                Some((7, frame)),
-                1,
-                Duration::ZERO,
-            );
-            wall_scan(&frame, &body_from_camera, [0.0; 2], &config)
+            let frame = apartment.frame([x, y, z], yaw, Some(frame));
+            wall_scan(&frame, &apartment.body_from_camera, [0.0; 2], &config)
         };
         for k in 0..8 {
             let z = crate::fleet::altitude_band(crate::fleet::LOWEST_BAND_M, k);
@@ -789,24 +796,11 @@ mod tests {
         // on the spot is measured as no motion, within twice the noise it states (while it was
         // written, a lone wall's normals' noise, weighed as a measurement, read the turn as a
         // slide of up to 15 cm).
-        let world = sitl::World::load("apartment").expect("the built-in world");
-        let camera = sitl::Camera::kinect(320, 240);
-        let body_from_camera = crate::fleet::sim_body_from_camera();
+        let apartment = Apartment::new();
         let config = DepthOdometryConfig::default();
         let look = |x: f64, y: f64, yaw: f64, frame: u64| {
-            let map_from_body = Isometry3::new(
-                nalgebra::Vector3::new(x, y, 0.6),
-                nalgebra::Vector3::z() * yaw,
-            );
-            let frame = sitl::render::render_frame(
-                &world,
-                &(map_from_body * body_from_camera),
-                &camera,
-                Some((7, frame)),
-                1,
-                Duration::ZERO,
-            );
-            wall_scan(&frame, &body_from_camera, [0.0; 2], &config)
+            let frame = apartment.frame([x, y, 0.6], yaw, Some(frame));
+            wall_scan(&frame, &apartment.body_from_camera, [0.0; 2], &config)
         };
         let step = 3.6f64.to_radians();
         for (x, y) in [(13.1, 2.1), (12.5, 2.6), (6.2, 1.7)] {
