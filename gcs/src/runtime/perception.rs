@@ -375,8 +375,8 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
     let mut online = vec![vec![]; n];
     let mut times: VecDeque<f64> = VecDeque::new();
     let depth_config = DepthOdometryConfig::default();
-    // Per drone, its last frame's walls: time, IMU heading, scan.
-    let mut walls: Vec<Option<(f64, Option<f64>, WallScan)>> = vec![None; n];
+    // Per drone, its last frame, scanned for walls only when a registration needs it.
+    let mut previous_frames: Vec<Option<WallFrame>> = (0..n).map(|_| None).collect();
     while !stop.load(Ordering::Relaxed) {
         let Ok(f) = frames.recv_timeout(Duration::from_millis(50)) else {
             continue;
@@ -405,7 +405,6 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
             .map(|b| proximity_readings(&f.frame, &b, proximity))
             .unwrap_or_default();
         let tilt = at_frame.and_then(|s| s.sample.tilt).unwrap_or_default();
-        let scan = body_from_camera.map(|b| wall_scan(&f.frame, &b, tilt, &depth_config));
         let Some(frame) = slam_frame(&f, at_frame, known) else {
             tracing::warn!(drone = k + 1, "malformed camera frame dropped");
             continue;
@@ -441,21 +440,32 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
         // Where the features measured no motion of a drone the map does not place, its
         // walls' depth may.
         let unplaced = matches!(report.tracking, Tracking::Lost(_) | Tracking::Weak { .. });
-        let previous = walls[k].take();
-        let depth_odometry = match (&previous, &scan, heading) {
-            (Some((since, Some(then), before)), Some(now), Some(heading))
+        let mut current = WallFrame {
+            stamp: f.stamp,
+            heading,
+            tilt,
+            frame: Arc::clone(&f.frame),
+            scan: None,
+        };
+        let depth_odometry = match (previous_frames[k].take(), body_from_camera, heading) {
+            (Some(mut previous), Some(body_from_camera), Some(heading))
                 if unplaced
                     && report.odometry.is_none()
-                    && f.stamp > *since
-                    && f.stamp - since <= slam.config().odometry_max_gap =>
+                    && f.stamp > previous.stamp
+                    && f.stamp - previous.stamp <= slam.config().odometry_max_gap =>
             {
-                let turn = wrap_angle(heading - then);
-                slam::depth_odometry::register(*since, before, now, turn, &depth_config)
-                    .filter(|o| !o.along.is_empty())
+                let since = previous.stamp;
+                previous.heading.and_then(|then| {
+                    let before = previous.scan(&body_from_camera, &depth_config);
+                    let now = current.scan(&body_from_camera, &depth_config);
+                    let turn = wrap_angle(heading - then);
+                    slam::depth_odometry::register(since, before, now, turn, &depth_config)
+                        .filter(|o| !o.along.is_empty())
+                })
             }
             _ => None,
         };
-        walls[k] = scan.map(|scan| (f.stamp, heading, scan));
+        previous_frames[k] = Some(current);
         let estimate = slam.estimate(k);
         if let Some(pose) = estimate.as_ref().and_then(RobotEstimate::map_from_camera) {
             online[k].push(Stamped { t: f.stamp, pose });
@@ -490,6 +500,29 @@ fn run(mut slam: Slam, io: &Io<'_>) -> PerceptionResult {
         slam,
         truth,
         online,
+    }
+}
+
+/// A drone's camera frame kept for depth odometry, with what levels it and, once a
+/// registration has needed it, its walls.
+struct WallFrame {
+    stamp: f64,
+    heading: Option<f64>,
+    tilt: [f64; 2],
+    frame: Arc<RgbdFrame>,
+    scan: Option<WallScan>,
+}
+
+impl WallFrame {
+    /// The frame's walls, scanned on first use (most frames are placed by the SLAM and never
+    /// need them).
+    fn scan(
+        &mut self,
+        body_from_camera: &Isometry3<f64>,
+        config: &DepthOdometryConfig,
+    ) -> &WallScan {
+        self.scan
+            .get_or_insert_with(|| wall_scan(&self.frame, body_from_camera, self.tilt, config))
     }
 }
 
