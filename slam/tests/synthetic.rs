@@ -753,18 +753,22 @@ fn on_a_vehicle_a_registration_on_fewer_than_the_checked_inliers_away_from_its_m
  {
     // Flying forward and hovering, every registration counted as one on enough inliers for a
     // keyframe but fewer than `vehicle_check_inliers`, so the only frame to check by is the
-    // first. Told the truth, the vehicle passes every one; predicting a slide of 0.3 m/s that
-    // is not there, it makes them weak from 0.1 m of slide on, for as long as the first frame
-    // is fresh enough to check by.
-    let run = |drift_mps: f64, vehicle_check_s: f64| {
+    // first. Told the truth, the vehicle passes every one; predicting a slide that is not
+    // there, it makes them weak once the slide is 0.1 m beyond the drift it is allowed
+    // (`vehicle_drift_mps`), for as long as the first frame is fresh enough to check by.
+    let run = |drift_mps: f64, vehicle_check_s: f64, vehicle_drift_mps: f64| {
         let config = SlamConfig {
             keyframe_min_inliers: 0,
             vehicle_check_inliers: usize::MAX,
             vehicle_check_s,
+            vehicle_drift_mps,
             ..SlamConfig::default()
         };
         forward_and_hold(
-            &format!("drift {drift_mps} m/s, checked for {vehicle_check_s} s"),
+            &format!(
+                "drift {drift_mps} m/s, checked for {vehicle_check_s} s, \
+                 {vehicle_drift_mps} m/s allowed"
+            ),
             config,
             |f| {
                 f.predicted_height_error = Some(0.0);
@@ -772,10 +776,10 @@ fn on_a_vehicle_a_registration_on_fewer_than_the_checked_inliers_away_from_its_m
             },
         )
     };
-    let honest = run(0.0, f64::INFINITY);
+    let honest = run(0.0, f64::INFINITY, 0.0);
     assert_eq!(honest.weak[0], 0);
     assert!(honest.tracked[0] * 10 >= honest.frames[0] * 9);
-    let always = run(0.3, f64::INFINITY);
+    let always = run(0.3, f64::INFINITY, 0.0);
     assert!(
         always.weak[0] * 10 >= always.frames[0] * 8,
         "{} of {} weak",
@@ -783,14 +787,38 @@ fn on_a_vehicle_a_registration_on_fewer_than_the_checked_inliers_away_from_its_m
         always.frames[0]
     );
     // Checked for 1 s: the frames from a third of a second (0.1 m of slide) to a second.
-    let fresh = run(0.3, 1.0);
+    let fresh = run(0.3, 1.0, 0.0);
     assert!(
         fresh.weak[0] > 0 && fresh.weak[0] * 3 <= always.weak[0],
         "{} weak checked for 1 s, {} always",
         fresh.weak[0],
         always.weak[0]
     );
-    assert_eq!(run(0.3, 0.0).weak[0], 0);
+    assert_eq!(run(0.3, 0.0, 0.0).weak[0], 0);
+    // Allowed 0.1 m/s: a prediction drifting slower than that refuses nothing however long
+    // the check lasts, and one drifting at 0.15 m/s refuses only from 2 s on (0.1 m beyond
+    // 0.2 m), not from 0.7 s as when it is allowed none.
+    assert_eq!(run(0.08, f64::INFINITY, 0.1).weak[0], 0);
+    let strict = run(0.15, f64::INFINITY, 0.0);
+    let allowed = run(0.15, f64::INFINITY, 0.1);
+    assert!(
+        allowed.weak[0] > 0 && allowed.weak[0] < strict.weak[0],
+        "{} weak allowed 0.1 m/s, {} allowed none",
+        allowed.weak[0],
+        strict.weak[0]
+    );
+    // By default, a slide of 0.5 m/s (stop 94's seed 1045, 25–27 inliers 1.0–1.4 s after the
+    // last frame to check by) is refused from a quarter of a second to 3 s after that frame,
+    // not only to 1 s as the check once did.
+    let d = SlamConfig::default();
+    let by_default = run(0.5, d.vehicle_check_s, d.vehicle_drift_mps);
+    let for_1_s = run(0.5, 1.0, d.vehicle_drift_mps);
+    assert!(
+        by_default.weak[0] >= 2 * for_1_s.weak[0] && for_1_s.weak[0] > 0,
+        "{} weak by default, {} checked for 1 s",
+        by_default.weak[0],
+        for_1_s.weak[0]
+    );
 }
 
 #[test]
