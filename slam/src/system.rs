@@ -1647,6 +1647,7 @@ impl Slam {
                 without_depth = reg.without_depth,
                 off_vehicle_m = off_vehicle,
                 off_checked_beyond_drift_m = off_checked,
+                since_checked_s = r.checked.map(|c| frame.stamp - c.stamp),
                 "weak registration: its frame is placed, nothing is built on it"
             );
         }
