@@ -133,7 +133,8 @@ pub struct SimArgs {
     #[arg(long, value_name = "BOOL", default_value_t = DroneConfig::default().speed_gain > 0.0, action = clap::ArgAction::Set)]
     pub speed_loop: bool,
     /// How a drone looks around at a goal: turning the short way to what the map shows
-    /// unknown, no further (`sweep`), or a whole turn every time (`whole`, as the thesis).
+    /// unknown, no further (`sweep`); the same, but first the way that shows the most unknown
+    /// soonest (`most-unknown-first`); or a whole turn every time (`whole`, as the thesis).
     #[arg(long, value_enum, default_value_t = LookAround::Sweep)]
     pub look_around: LookAround,
 }
@@ -143,6 +144,9 @@ pub struct SimArgs {
 pub enum LookAround {
     /// Turn the short way to what the map shows unknown, and no further.
     Sweep,
+    /// As `sweep`, but turn first the way that shows the most unknown soonest (a room through
+    /// a door before a jamb's shadow), so drones waiting for a frontier get one sooner.
+    MostUnknownFirst,
     /// A whole turn every time.
     Whole,
 }
@@ -585,9 +589,12 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
             timeout: Some(args.timeout),
             drone: DroneConfig {
                 sweep: match args.sim.look_around {
-                    LookAround::Sweep => DroneConfig::default().sweep,
+                    LookAround::Sweep | LookAround::MostUnknownFirst => {
+                        DroneConfig::default().sweep
+                    }
                     LookAround::Whole => None,
                 },
+                look_most_unknown_first: args.sim.look_around == LookAround::MostUnknownFirst,
                 battery_swap: args.sim.battery_swap.map(|_| BatterySwap::default()),
                 follower: FollowerConfig {
                     max_speed_mps: args.sim.max_speed,
@@ -1019,6 +1026,23 @@ mod tests {
         assert!(parse(&["--plan-when-looked", "true"]).sim.plan_when_looked);
         assert!(!parse(&["--plan-when-looked", "false"]).sim.plan_when_looked);
         assert!(Cli::try_parse_from(["explore", "--plan-when-looked", "soon"]).is_err());
+    }
+
+    #[test]
+    fn a_look_around_sweeps_the_short_way_unless_told_to_see_the_most_unknown_first_or_turn_whole()
+    {
+        assert_eq!(parse(&[]).sim.look_around, LookAround::Sweep);
+        for (value, want) in [
+            ("sweep", LookAround::Sweep),
+            ("most-unknown-first", LookAround::MostUnknownFirst),
+            ("whole", LookAround::Whole),
+        ] {
+            assert_eq!(parse(&["--look-around", value]).sim.look_around, want);
+        }
+        let e = Cli::try_parse_from(["explore", "--look-around", "most"])
+            .err()
+            .expect("not a way to look around");
+        assert!(e.to_string().contains("most-unknown-first"), "{e}");
     }
 
     #[test]

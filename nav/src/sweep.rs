@@ -69,6 +69,17 @@ impl View {
 /// [`View::min_unknown_cells`]) between the camera's minimum and maximum range before it meets
 /// a wall or leaves the map.
 pub fn unknown_bearings(map: &Grid, at: [f64; 2], view: &View, bins: usize) -> Vec<bool> {
+    unknown_cells(map, at, view, bins)
+        .into_iter()
+        .map(|n| n >= view.min_unknown_cells)
+        .collect()
+}
+
+/// How many unknown cells the central ray of each of `bins` equal sectors around `at` crosses
+/// between the camera's minimum and maximum range before it meets a wall or leaves the map:
+/// how much a look that way would show ([`unknown_bearings`] counts those of at least
+/// [`View::min_unknown_cells`]).
+pub fn unknown_cells(map: &Grid, at: [f64; 2], view: &View, bins: usize) -> Vec<usize> {
     let step = map.resolution() / 2.0;
     (0..bins)
         .map(|b| {
@@ -89,7 +100,7 @@ pub fn unknown_bearings(map: &Grid, at: [f64; 2], view: &View, bins: usize) -> V
                 last = Some(c);
                 s += step;
             }
-            unknown >= view.min_unknown_cells
+            unknown
         })
         .collect()
 }
@@ -130,6 +141,28 @@ pub fn direction(unknown: &[bool], yaw: f64, view: &View) -> f64 {
     };
     // A tie (the same turn either way, to rounding) goes counter-clockwise.
     if need(-1.0) < need(1.0) - 1e-9 {
+        -1.0
+    } else {
+        1.0
+    }
+}
+
+/// The way to turn from heading `yaw` so that what the map shows unknown comes into view
+/// soonest on average, each bearing weighed by its unknown `cells` (from [`unknown_cells`];
+/// bearings with fewer than [`View::min_unknown_cells`] weigh nothing): +1 counter-clockwise,
+/// −1 clockwise (counter-clockwise on a tie). Where [`direction`] ends the whole look
+/// soonest, this sees the most first: a room through a door before the shadow of a jamb, so
+/// the planner can send a waiting robot there while the look goes on.
+pub fn direction_most_unknown_first(cells: &[usize], yaw: f64, view: &View) -> f64 {
+    let wait = |direction: f64| -> f64 {
+        cells
+            .iter()
+            .enumerate()
+            .filter(|&(_, &n)| n >= view.min_unknown_cells)
+            .map(|(b, &n)| n as f64 * turn_to_see(bearing_of(b, cells.len()), yaw, direction, view))
+            .sum()
+    };
+    if wait(-1.0) < wait(1.0) - 1e-9 {
         -1.0
     } else {
         1.0
@@ -430,6 +463,42 @@ mod tests {
         let none = vec![false; 72];
         assert_eq!(direction(&none, 1.0, &view), 1.0);
         assert!(!still_unknown_ahead(&none, 1.0, 1.0, 0.0, &view));
+    }
+
+    #[test]
+    fn most_unknown_first_turns_toward_a_room_through_a_door_before_a_sliver_the_short_way() {
+        let view = View::default();
+        // Facing north (90°): a sliver of unknown just out of view to the right (bearings
+        // 35–47°, a jamb's shadow), and an unknown room through a door to the west (bearings
+        // 153–207°).
+        let map = room(&[([1.2, 1.6], [1.0, 1.4]), ([-2.9, -1.0], [-0.5, 0.5])]);
+        let cells = unknown_cells(&map, [0.0, 0.0], &view, 72);
+        let bearings = unknown_bearings(&map, [0.0, 0.0], &view, 72);
+        assert_eq!(
+            bearings,
+            cells
+                .iter()
+                .map(|&n| n >= view.min_unknown_cells)
+                .collect::<Vec<_>>()
+        );
+        let (west, sliver) = (cells[35] + cells[36], cells[7] + cells[8]);
+        assert!(
+            west > 2 * sliver && sliver > 0,
+            "west {west}, sliver {sliver}"
+        );
+        let north = 90f64.to_radians();
+        // Seeing everything: counter-clockwise the view's edge turns 288° to the sliver,
+        // clockwise 269° to the door; the shortest whole look is clockwise…
+        assert_eq!(direction(&bearings, north, &view), -1.0);
+        // …but counter-clockwise the room is in view after 88°, not 215–269°.
+        assert_eq!(direction_most_unknown_first(&cells, north, &view), 1.0);
+        // With the room on the right instead, both agree.
+        let east = room(&[([0.6, 2.9], [-1.0, 1.0])]);
+        let cells = unknown_cells(&east, [0.0, 0.0], &view, 72);
+        assert_eq!(direction_most_unknown_first(&cells, north, &view), -1.0);
+        // Bearings below the ragged-edge threshold weigh nothing: none left, counter-clockwise.
+        let edges: Vec<usize> = vec![view.min_unknown_cells - 1; 72];
+        assert_eq!(direction_most_unknown_first(&edges, north, &view), 1.0);
     }
 
     #[test]

@@ -221,6 +221,11 @@ pub struct DroneConfig {
     /// only as far as that ([`nav::sweep`]; the field of view is each drone's camera's once
     /// its frames have told it); `None`: a whole turn every time.
     pub sweep: Option<View>,
+    /// A look around turns first the way that shows the most of what the map has unknown
+    /// soonest ([`nav::sweep::direction_most_unknown_first`]: a room through a door before a
+    /// jamb's shadow, so a drone waiting for a frontier gets one sooner), not the way that ends
+    /// it soonest ([`nav::sweep::direction`]).
+    pub look_most_unknown_first: bool,
     /// ... but lasts at least this long, seconds (the map lags the camera by up to a second).
     pub scan_min_s: f64,
     /// Drones whose starts lie within this distance of one another take off to one shared look
@@ -398,6 +403,7 @@ impl Default for DroneConfig {
             stuck_s: 15.0,
             scan_s: 10.0,
             sweep: Some(View::default()),
+            look_most_unknown_first: false,
             scan_min_s: 2.0,
             look_together_m: 2.0,
             look_lost_s: 1.5,
@@ -2035,8 +2041,14 @@ impl Drone {
     ) -> Scan {
         let mut scan = Scan::new(now, pose[3], give_up, config);
         if let (Some(view), Some(map)) = (self.view(config), &self.map) {
-            let unknown = sweep::unknown_bearings(map, [pose[0], pose[1]], &view, SWEEP_BEARINGS);
-            scan.direction = sweep::direction(&unknown, pose[3], &view);
+            let here = [pose[0], pose[1]];
+            scan.direction = if config.look_most_unknown_first {
+                let cells = sweep::unknown_cells(map, here, &view, SWEEP_BEARINGS);
+                sweep::direction_most_unknown_first(&cells, pose[3], &view)
+            } else {
+                let unknown = sweep::unknown_bearings(map, here, &view, SWEEP_BEARINGS);
+                sweep::direction(&unknown, pose[3], &view)
+            };
         }
         scan
     }
@@ -3920,6 +3932,43 @@ mod tests {
         assert_eq!(drone.plan_heading(&config), None);
         drone.scan = None;
         assert_eq!(drone.plan_heading(&config), Some(yaw));
+    }
+
+    #[test]
+    fn a_look_around_told_to_see_the_most_unknown_first_turns_toward_it_not_the_short_way() {
+        // Facing east at (0, 0): a sliver of unknown just out of view to the right (bearings
+        // −33° to −50°) and a bigger unknown behind to the left (112°–171°). Seeing both ends
+        // soonest clockwise; the bigger is seen soonest counter-clockwise.
+        let mut map = walled_room(Some(([-1.95, -0.8], [0.3, 1.95])));
+        for y in 0..80 {
+            for x in 0..80 {
+                let p = map.center_of((x, y));
+                if (1.0..1.4).contains(&p[0]) && (-1.2..-0.8).contains(&p[1]) {
+                    map.set((x, y), nav::Cell::Unknown);
+                }
+            }
+        }
+        let map = Arc::new(map);
+        let turned = |most_unknown_first: bool| {
+            let config = DroneConfig {
+                look_most_unknown_first: most_unknown_first,
+                ..DroneConfig::default()
+            };
+            let mut drone = exploring_drone(Arc::default(), &config);
+            drone.set_map(map.clone());
+            drone.set_plan(Some([1.0, 0.0]), vec![[0.0, 0.0]], None, 0.0);
+            let mut t = 0.0;
+            while t < 1.0 {
+                t += 0.1;
+                drone.slam_fix(t, [0.0, 0.0, 0.9], drone.yaw_goal, None, false);
+                assert_eq!(drone.tick(t, &config), None, "still looking at {t} s");
+            }
+            drone.yaw_goal - drone.scan.map_or(f64::NAN, |s| s.yaw0)
+        };
+        let short = turned(false);
+        assert!(short < -0.3, "clockwise: {short} rad");
+        let most = turned(true);
+        assert!(most > 0.3, "counter-clockwise: {most} rad");
     }
 
     #[test]
