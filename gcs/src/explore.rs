@@ -112,6 +112,11 @@ pub struct SimArgs {
     /// middle of a door, not along its jamb; `false`: shortest paths.
     #[arg(long, value_name = "BOOL", default_value_t = RuntimeConfig::default().centre_paths, action = clap::ArgAction::Set)]
     pub centre_paths: bool,
+    /// Paths keep this far from the unknown where they can, metres: a wall the cameras have
+    /// not seen yet may begin at its edge, and only walls on the map are grown by the planner's
+    /// radius; 0: paths at the widest radius keep nothing from it.
+    #[arg(long, value_name = "METRES", default_value_t = RuntimeConfig::default().unknown_comfort_m)]
+    pub unknown_comfort: f64,
     /// A drone that ends its look around with nowhere to go is planned for as soon as the map
     /// holds what the look saw, not at the planner's next once-a-second step
     /// (`RuntimeConfig::plan_when_looked`).
@@ -554,6 +559,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
             turn_m_per_rad: Some(args.sim.turn_cost),
             stage_back_m: Some(args.sim.stage_back),
             centre_paths: Some(args.sim.centre_paths),
+            unknown_comfort_m: Some(args.sim.unknown_comfort),
             drones: fleet
                 .drones
                 .iter()
@@ -585,6 +591,7 @@ pub fn run_with(args: &ExploreArgs, window: Option<Window>) -> anyhow::Result<()
             turn_m_per_rad: args.sim.turn_cost,
             stage_back_m: args.sim.stage_back,
             centre_paths: args.sim.centre_paths,
+            unknown_comfort_m: args.sim.unknown_comfort,
             plan_when_looked: args.sim.plan_when_looked,
             timeout: Some(args.timeout),
             drone: DroneConfig {

@@ -179,6 +179,7 @@ pub fn run_with(args: &FlyArgs, window: Option<Window>) -> anyhow::Result<()> {
             turn_m_per_rad: Some(RuntimeConfig::default().turn_m_per_rad),
             stage_back_m: Some(RuntimeConfig::default().stage_back_m),
             centre_paths: Some(RuntimeConfig::default().centre_paths),
+            unknown_comfort_m: Some(RuntimeConfig::default().unknown_comfort_m),
             drones: fleet
                 .iter()
                 .map(|v| SetupDrone::new(&v.name, v.start, &body_from_camera, v.altitude))

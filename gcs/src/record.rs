@@ -66,6 +66,11 @@ pub struct Setup {
     /// shortest at every radius).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub centre_paths: Option<bool>,
+    /// How far paths kept from the unknown where they could, metres
+    /// (`nav::mission::PlannerConfig::unknown_comfort_m`; absent from older logs, whose paths
+    /// kept nothing more from it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unknown_comfort_m: Option<f64>,
     /// The drones.
     pub drones: Vec<SetupDrone>,
 }

@@ -337,6 +337,8 @@ pub(crate) fn planner_configs(setup: &Setup) -> Vec<PlannerConfig> {
             robot_radius_m,
             // …and planned shortest paths at every radius.
             comfort_m: centring_comfort(centre, &radii, robot_radius_m),
+            // …and kept nothing more from the unknown.
+            unknown_comfort_m: setup.unknown_comfort_m.unwrap_or(0.0),
             region_radius_m: setup.region_radius_m.unwrap_or(0.0),
             // Logs from before the margin planned without one.
             hold_margin_m: setup.hold_margin_m.unwrap_or(0.0),
@@ -467,6 +469,7 @@ mod tests {
             turn_m_per_rad: None,
             stage_back_m: None,
             centre_paths: None,
+            unknown_comfort_m: None,
             drones: vec![],
         });
         assert_eq!(configs.len(), RuntimeConfig::default().planner_radii.len());
@@ -477,7 +480,8 @@ mod tests {
             && c.max_pocket_m2 == 0.0
             && c.turn_m_per_rad == 0.0
             && c.stage_back_m == 0.0
-            && c.comfort_m == 0.0));
+            && c.comfort_m == 0.0
+            && c.unknown_comfort_m == 0.0));
         let with_regions = planner_configs(&Setup {
             version: 1,
             world: None,
@@ -489,6 +493,7 @@ mod tests {
             turn_m_per_rad: Some(0.9),
             stage_back_m: Some(1.5),
             centre_paths: Some(true),
+            unknown_comfort_m: Some(0.3),
             drones: vec![],
         });
         assert_eq!(with_regions.len(), 1);
@@ -499,6 +504,7 @@ mod tests {
         assert_eq!(with_regions[0].stage_back_m, 1.5);
         // One radius: no wider one to keep the distance of.
         assert_eq!(with_regions[0].comfort_m, 0.0);
+        assert_eq!(with_regions[0].unknown_comfort_m, 0.3);
         assert_eq!(with_regions[0].strategy, Strategy::Greedy);
         let robots = [Some([0.5, 1.0])];
         let live = nav::mission::plan_first_open(&grid, &robots, &configs)

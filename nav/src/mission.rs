@@ -2,7 +2,7 @@
 //! pose, each robot's frontier target and path, a hover, or "exploration complete".
 
 use crate::assignment::{greedy, hungarian, spread};
-use crate::clearance::centred_path;
+use crate::clearance::{Comfort, centred_path};
 use crate::frontier::{Frontier, FrontierLimits, frontiers, regions};
 use crate::grid::{Cell, CellXY, Grid};
 use crate::inflate::inflate;
@@ -51,6 +51,11 @@ pub struct PlannerConfig {
     /// and [`plan_first_open`] does the same on a path lent by a thinner configuration. (0.3 m on every plan, tried early on, cut collisions on true
     /// poses but mapped less on SLAM poses, when the SLAM was far weaker.)
     pub comfort_m: f64,
+    /// Paths keep this far from the unknown where they can, metres (see [`crate::clearance`]):
+    /// a wall the camera has not seen yet may begin at its edge, and only walls on the map are
+    /// inflated. [`PlannerConfig::comfort_m`] keeps from the unknown too, but at the widest
+    /// radius it is 0. 0 (the default): nothing more.
+    pub unknown_comfort_m: f64,
     /// A frontier whose goal no robot can reach is given, as its goal, the reachable cell
     /// nearest to it within this range that sees it ([`crate::vantage::viewpoint`]), metres
     /// (within the camera's range: the occupancy map takes depth up to 4 m). 0: such a frontier
@@ -112,6 +117,16 @@ pub struct PlannerConfig {
     pub stage_back_m: f64,
 }
 
+impl PlannerConfig {
+    /// The distances its paths keep where they can.
+    pub fn comfort(&self) -> Comfort {
+        Comfort {
+            blocked_m: self.comfort_m,
+            unknown_m: self.unknown_comfort_m,
+        }
+    }
+}
+
 impl Default for PlannerConfig {
     fn default() -> Self {
         Self {
@@ -124,6 +139,7 @@ impl Default for PlannerConfig {
             look_around_room_m: 0.7,
             look_around_shift_m: 1.5,
             comfort_m: 0.0,
+            unknown_comfort_m: 0.0,
             view_range_m: 2.5,
             frontier_margin_m: 0.1,
             region_radius_m: 0.0,
@@ -375,7 +391,7 @@ fn stage_idle(map: &Grid, robots: &[Option<[f64; 2]>], config: &PlannerConfig, s
             config.look_around_room_m,
             config.look_around_shift_m,
         );
-        if let Some(cells) = centred_path(inflated, origin, look_from, config.comfort_m) {
+        if let Some(cells) = centred_path(inflated, origin, look_from, config.comfort()) {
             let path: Vec<[f64; 2]> = cells.into_iter().map(|c| inflated.center_of(c)).collect();
             let length = path_length(&path);
             staging.push((r, f, path, length));
@@ -608,7 +624,7 @@ pub fn plan(
             );
             let (Some(cost), Some(cells)) = (
                 raw[r][f],
-                centred_path(&inflated, origin, look_from, config.comfort_m),
+                centred_path(&inflated, origin, look_from, config.comfort()),
             ) else {
                 return hover("assigned frontier unreachable");
             };
@@ -740,7 +756,7 @@ fn holding(
 }
 
 /// A collision-free route from `from` to `to` (map frame, metres) on `map` with obstacles grown
-/// by `robot_radius_m`, keeping `comfort_m` more where it can ([`centred_path`]), both ends
+/// by `robot_radius_m`, keeping the `comfort` distances where it can ([`centred_path`]), both ends
 /// moved to the nearest free cell, in straight segments. `None` when either end is off the map
 /// or no route exists. The global planner for a drone flying home.
 pub fn route(
@@ -748,14 +764,14 @@ pub fn route(
     from: [f64; 2],
     to: [f64; 2],
     robot_radius_m: f64,
-    comfort_m: f64,
+    comfort: Comfort,
 ) -> Option<Vec<[f64; 2]>> {
     let inflated = inflate(map, robot_radius_m);
     let reach = (robot_radius_m / map.resolution()).ceil() as usize * 2 + 2;
     let a = nearest_free(&inflated, map.cell_of(from)?, reach)?;
     let b = nearest_free(&inflated, map.cell_of(to)?, reach)?;
     Some(
-        centred_path(&inflated, a, b, comfort_m)?
+        centred_path(&inflated, a, b, comfort)?
             .into_iter()
             .map(|c| inflated.center_of(c))
             .collect(),
@@ -1713,5 +1729,41 @@ mod tests {
         let r = &p.robots[0];
         assert_eq!(r.frontier, Some(reachable), "{r:?}");
         assert!(!r.path.is_empty(), "{r:?}");
+    }
+
+    #[test]
+    fn a_route_keeps_from_the_unknown_when_asked() {
+        // A hall 8 × 3 m on a map that knows nothing round it, whose north 0.95 m is not seen
+        // yet either (a wall may begin at its edge, y = 2.25 m), crossed just below it.
+        let mut map = Grid::new(170, 70, 0.05, [0.0, 0.0], Cell::Unknown);
+        for y in 5..65 {
+            for x in 5..165 {
+                if x == 5 || y == 5 || x == 164 || y == 64 {
+                    map.set((x, y), Cell::Occupied);
+                } else if y < 45 {
+                    map.set((x, y), Cell::Free);
+                }
+            }
+        }
+        let (from, to) = ([0.8, 2.15], [7.5, 2.15]);
+        let route_with = |comfort| route(&map, from, to, 0.45, comfort).expect("a route");
+        let lowest = |path: &[[f64; 2]]| path.iter().map(|p| p[1]).fold(f64::INFINITY, f64::min);
+        let plain = route_with(Comfort::default());
+        assert_eq!(
+            plain.len(),
+            2,
+            "the straight line along the unknown: {plain:?}"
+        );
+        let kept = route_with(Comfort {
+            blocked_m: 0.0,
+            unknown_m: 0.45,
+        });
+        assert!(
+            lowest(&kept) < 2.25 - 0.35,
+            "a route keeping from the unknown dips away from it: {kept:?}"
+        );
+        for (a, b) in [(plain[0], kept[0]), (plain[1], kept[kept.len() - 1])] {
+            assert!((a[0] - b[0]).hypot(a[1] - b[1]) < 1e-9, "same ends");
+        }
     }
 }

@@ -27,6 +27,7 @@ use std::time::Duration;
 
 use link::{LinkStatus, Sticks, Telemetry};
 use nav::blacklist::Blacklist;
+use nav::clearance::Comfort;
 use nav::grid::Grid;
 use nav::mission::{PlannerConfig, Strategy, centring_comfort};
 use slam::system::{RobotState, Slam};
@@ -67,6 +68,10 @@ pub struct RuntimeConfig {
     /// of a door, not along its jamb. On by default (off from stop 66 for a hang that turned
     /// out to be the planner's, not this: see [`stall`]).
     pub centre_paths: bool,
+    /// Paths keep this far from the unknown where they can, at every radius
+    /// ([`PlannerConfig::unknown_comfort_m`]), metres: a wall not seen yet may begin at its
+    /// edge. 0: no more than [`RuntimeConfig::centre_paths`] keeps.
+    pub unknown_comfort_m: f64,
     /// Control period, seconds (mission clock).
     pub control_period: f64,
     /// Mission-planner period, seconds.
@@ -113,6 +118,7 @@ impl Default for RuntimeConfig {
             turn_m_per_rad: PlannerConfig::default().turn_m_per_rad,
             stage_back_m: PlannerConfig::default().stage_back_m,
             centre_paths: true,
+            unknown_comfort_m: 0.45,
             control_period: 0.1,
             plan_period: 1.0,
             plan_when_looked: false,
@@ -932,6 +938,7 @@ impl Mission {
             .iter()
             .map(|&robot_radius_m| PlannerConfig {
                 comfort_m: centring_comfort(self.config.centre_paths, radii, robot_radius_m),
+                unknown_comfort_m: self.config.unknown_comfort_m,
                 strategy: self.config.strategy,
                 robot_radius_m,
                 blacklist: self.blacklist.ignored(),
@@ -1158,7 +1165,10 @@ impl Mission {
         };
         let radii = &self.config.planner_radii;
         let radius = radii.last().copied().unwrap_or(0.25);
-        let comfort_m = centring_comfort(self.config.centre_paths, radii, radius);
+        let comfort = Comfort {
+            blocked_m: centring_comfort(self.config.centre_paths, radii, radius),
+            unknown_m: self.config.unknown_comfort_m,
+        };
         for d in &mut self.drones {
             if d.phase != Phase::Returning {
                 continue;
@@ -1166,7 +1176,7 @@ impl Mission {
             let (Some(p), Some(home)) = (d.pose(), d.goal) else {
                 continue;
             };
-            match nav::mission::route(&grid, [p[0], p[1]], home, radius, comfort_m) {
+            match nav::mission::route(&grid, [p[0], p[1]], home, radius, comfort) {
                 Some(path) => d.set_home_path(path),
                 None => {
                     // No known way home: land where it is.
