@@ -404,6 +404,12 @@ fn validate(args: &ExploreArgs) -> anyhow::Result<Vec<Fault>> {
             args.sim.stage_back
         );
     }
+    if !(args.sim.unknown_comfort.is_finite() && (0.0..=5.0).contains(&args.sim.unknown_comfort)) {
+        bail!(
+            "--unknown-comfort {} must be between 0 (off) and 5 metres",
+            args.sim.unknown_comfort
+        );
+    }
     if !(args.sim.turn_cost.is_finite() && (0.0..=10.0).contains(&args.sim.turn_cost)) {
         bail!(
             "--turn-cost {} must be between 0 (off) and 10 metres per radian",

@@ -756,6 +756,14 @@ fn bad_explore_arguments_are_refused_before_anything_starts() {
             "must be between 0 (off) and 50 metres",
         ),
         (
+            vec!["explore", "--unknown-comfort=-0.2"],
+            "--unknown-comfort -0.2 must be between 0 (off) and 5 metres",
+        ),
+        (
+            vec!["explore", "--unknown-comfort", "inf"],
+            "must be between 0 (off) and 5 metres",
+        ),
+        (
             vec!["explore", "--max-pocket=-0.5"],
             "must be between 0 (off) and 100 square metres",
         ),
